@@ -1,0 +1,170 @@
+//! `ins-cli data …`: inspect scenes (summary, sanity checks, contact sheet), print the rays of
+//! pixels, and write small analytic scenes.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Subcommand;
+use ins_core::data::check::check_scene;
+use ins_core::data::contact_sheet::contact_sheet;
+use ins_core::data::synthetic::{self, SynthOptions};
+use ins_core::data::{LoadOptions, Scene, SceneFormat, Split};
+use ins_core::render::geometry::Bounds;
+
+/// Scene data commands.
+#[derive(Subcommand, Debug)]
+pub enum DataCommand {
+    /// Summarize a scene folder (format detected), run geometric sanity checks and write a
+    /// contact sheet of thumbnails with the bounding volume drawn in.
+    Check {
+        /// Scene folder (Blender, LLFF or DTU/IDR layout).
+        dir: PathBuf,
+        /// Print the report as JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Where to write the contact sheet PNG [default: ./<scene>-contact.png].
+        #[arg(long)]
+        sheet: Option<PathBuf>,
+        /// Do not write a contact sheet.
+        #[arg(long, conflicts_with = "sheet")]
+        no_sheet: bool,
+        /// Integer downscale factor applied when loading.
+        #[arg(long, default_value_t = 1)]
+        downscale: u32,
+    },
+    /// Print one JSON line per pixel: the ray through its centre, in the scene frame (DTU: the
+    /// unit-sphere frame; LLFF: the rescaled, recentred frame).
+    Rays {
+        /// Scene folder.
+        dir: PathBuf,
+        /// Split the view index counts in.
+        #[arg(long, default_value = "train")]
+        split: Split,
+        /// View index within the split.
+        #[arg(long)]
+        view: usize,
+        /// Pixel as COLUMN,ROW (integers; the ray goes through the centre (u+0.5, v+0.5)).
+        #[arg(long = "pixel", required = true, value_parser = parse_pixel)]
+        pixels: Vec<(u32, u32)>,
+        /// Integer downscale factor applied when loading (pixels count in the downscaled image).
+        #[arg(long, default_value_t = 1)]
+        downscale: u32,
+    },
+    /// Write a small analytic scene (spheres, boxes, checker textures) in a dataset format.
+    Synth {
+        /// blender, llff or dtu.
+        #[arg(long)]
+        format: SceneFormat,
+        /// Output folder (created).
+        #[arg(long)]
+        out: PathBuf,
+        /// Image width in pixels.
+        #[arg(long, default_value_t = 64)]
+        size: u32,
+        /// Number of views (Blender: training views; val and test get a quarter each).
+        #[arg(long, default_value_t = 10)]
+        views: usize,
+    },
+}
+
+/// Runs a data command.
+pub fn run(cmd: DataCommand) -> Result<()> {
+    match cmd {
+        DataCommand::Check { dir, json, sheet, no_sheet, downscale } => check(&dir, json, sheet, no_sheet, downscale),
+        DataCommand::Rays { dir, split, view, pixels, downscale } => rays(&dir, split, view, &pixels, downscale),
+        DataCommand::Synth { format, out, size, views } => {
+            let s = synthetic::write(format, &out, &SynthOptions { size, views })?;
+            println!("wrote a {format} scene with {} views to {}", s.views.len(), out.display());
+            Ok(())
+        }
+    }
+}
+
+fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
+    let (u, v) = s.split_once(',').ok_or_else(|| format!("pixel {s:?} is not COLUMN,ROW"))?;
+    let p = |t: &str| t.trim().parse::<u32>().map_err(|_| format!("pixel {s:?}: {t:?} is not a non-negative integer"));
+    Ok((p(u)?, p(v)?))
+}
+
+fn check(dir: &Path, json: bool, sheet: Option<PathBuf>, no_sheet: bool, downscale: u32) -> Result<()> {
+    let t = Instant::now();
+    let scene = Scene::load(dir, &LoadOptions { downscale, ..Default::default() })?;
+    let load_s = t.elapsed().as_secs_f64();
+    let report = check_scene(&scene);
+    let sheet_path = if no_sheet {
+        None
+    } else {
+        let p = sheet.unwrap_or_else(|| PathBuf::from(format!("{}-contact.png", scene.name)));
+        contact_sheet(&scene, 16, 200).save_png(&p)?;
+        Some(p)
+    };
+    if json {
+        let v = serde_json::json!({
+            "summary": report.summary,
+            "checks": report.checks,
+            "load_seconds": load_s,
+            "contact_sheet": sheet_path.as_ref().map(|p| p.display().to_string()),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        let s = &report.summary;
+        println!("scene    {} ({}) at {}", s.name, s.format, s.root);
+        println!("views    {}: train {}, val {}, test {}", s.views, s.train, s.val, s.test);
+        println!(
+            "images   {}×{}, focal {:.2} × {:.2} (fx {:.2}–{:.2} over views), principal point ({:.2}, {:.2})",
+            s.width, s.height, s.focal[0], s.focal[1], s.focal_x_range[0], s.focal_x_range[1], s.principal_point[0], s.principal_point[1]
+        );
+        let range = if s.per_ray_range { "per ray, clipped to the bounding volume" } else { "fixed" };
+        println!("depth    near {:.3}, far {:.3} ({range})", s.near, s.far);
+        match s.bounds {
+            Bounds::Sphere { center, radius } => println!("bounds   sphere centre {center:?} radius {radius}"),
+            Bounds::Aabb { min, max } => println!("bounds   box {} – {}", fmt3(min), fmt3(max)),
+        }
+        match s.mean_mask_coverage {
+            Some(c) => println!("masks    {} views, mean foreground {:.1}%", s.masks, 100.0 * c),
+            None => println!("masks    none"),
+        }
+        println!("cameras  {:.3}–{:.3} from the volume's centre; source→scene scale {:.4}", s.camera_distance[0], s.camera_distance[1], s.to_scene_scale);
+        println!("loaded   in {load_s:.2} s");
+        println!("checks");
+        for c in &report.checks {
+            let note = if c.note.is_empty() { String::new() } else { format!("  ({})", c.note) };
+            println!("  {:<4}  {}: {}/{}{note}", if c.ok { "ok" } else { "FAIL" }, c.name, c.passed, c.total);
+        }
+        if let Some(p) = &sheet_path {
+            println!("contact sheet: {}", p.display());
+        }
+    }
+    if !report.all_ok() {
+        let failed = report.checks.iter().filter(|c| !c.ok).count();
+        bail!("{failed} of {} checks failed for {}", report.checks.len(), dir.display());
+    }
+    Ok(())
+}
+
+fn fmt3(v: [f32; 3]) -> String {
+    format!("[{:.3}, {:.3}, {:.3}]", v[0], v[1], v[2])
+}
+
+fn rays(dir: &Path, split: Split, view: usize, pixels: &[(u32, u32)], downscale: u32) -> Result<()> {
+    let opts = LoadOptions { downscale, splits: Some(vec![split]), ..Default::default() };
+    let scene = Scene::load(dir, &opts)?;
+    let views = scene.split(split);
+    let &index = views
+        .get(view)
+        .with_context(|| format!("split {split} of {} has {} views; view {view} does not exist", dir.display(), views.len()))?;
+    let rays = scene.pixel_rays(index, pixels)?;
+    for (i, &(u, v)) in pixels.iter().enumerate() {
+        let line = serde_json::json!({
+            "view": view,
+            "pixel": [u, v],
+            "origin": rays.origins[i],
+            "direction": rays.directions[i],
+            "near": rays.near[i],
+            "far": rays.far[i],
+        });
+        println!("{line}");
+    }
+    Ok(())
+}

@@ -1,0 +1,79 @@
+//! Choosing the compute backend at run time. Every backend runs the same code: Burn tensors
+//! carry their backend in their `Device`.
+
+use burn::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// A backend choice as given on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendChoice {
+    /// wgpu when a hardware GPU adapter exists, otherwise flex.
+    #[default]
+    Auto,
+    /// Burn's pure-Rust CPU backend (the fastest on CPU).
+    Flex,
+    /// The ndarray CPU backend (slow convolution backward; kept for comparison).
+    Ndarray,
+    /// wgpu (Vulkan/Metal/DX12; on CPU-only machines Mesa's lavapipe).
+    Wgpu,
+}
+
+impl std::str::FromStr for BackendChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "auto" => Ok(Self::Auto),
+            "flex" | "cpu" => Ok(Self::Flex),
+            "ndarray" => Ok(Self::Ndarray),
+            "wgpu" | "gpu" => Ok(Self::Wgpu),
+            _ => Err(format!("unknown backend {s:?} (expected auto, flex, ndarray or wgpu)")),
+        }
+    }
+}
+
+impl std::fmt::Display for BackendChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Auto => "auto",
+            Self::Flex => "flex",
+            Self::Ndarray => "ndarray",
+            Self::Wgpu => "wgpu",
+        })
+    }
+}
+
+impl BackendChoice {
+    /// Resolves `Auto` to a concrete backend.
+    pub fn resolve(self) -> Self {
+        match self {
+            Self::Auto => {
+                if hardware_gpu_present() {
+                    Self::Wgpu
+                } else {
+                    Self::Flex
+                }
+            }
+            other => other,
+        }
+    }
+
+    /// The device (without autodiff) for this choice.
+    #[allow(deprecated)]
+    pub fn device(self) -> Device {
+        match self.resolve() {
+            Self::Flex | Self::Auto => Device::flex(),
+            Self::Ndarray => Device::ndarray(),
+            Self::Wgpu => Device::wgpu(DeviceKind::DefaultDevice),
+        }
+    }
+}
+
+/// Whether a discrete or integrated GPU (not a software rasterizer) is visible to wgpu.
+/// `INS_NO_GPU=1` forces "no".
+pub fn hardware_gpu_present() -> bool {
+    if std::env::var_os("INS_NO_GPU").is_some() {
+        return false;
+    }
+    std::panic::catch_unwind(|| !Device::enumerate_physical().is_empty()).unwrap_or(false)
+}

@@ -1,0 +1,226 @@
+//! LLFF forward-facing scenes: `poses_bounds.npy` (N×17: a 3×5 matrix `[R | t | (H, W, f)]`
+//! with rotation columns [down, right, back], then the near and far depth of the view) and the
+//! images in `images/` or `images_N/`.
+//!
+//! The standard handling of NeRF's `load_llff_data`: columns reordered to [right, up, back]
+//! (our OpenGL convention), positions and bounds rescaled so the nearest bound becomes
+//! `1 / bd_factor` (0.75 → 1.33), poses recentred on their average pose, and every 8th view
+//! (0, 8, 16, …) held out for test (and val, as NeRF does).
+
+use std::path::{Path, PathBuf};
+
+use super::DataError;
+use super::images::{list_images, parallel_map, read_image};
+use super::npy::read_npy;
+use super::scene::{LoadOptions, Scene, SceneFormat, View};
+use crate::render::camera::Camera;
+use crate::render::geometry::{Bounds, Similarity};
+
+/// Reads an LLFF scene from `dir`.
+pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
+    let npy_path = dir.join("poses_bounds.npy");
+    if !npy_path.is_file() {
+        return Err(DataError::missing(&npy_path, "LLFF poses and bounds"));
+    }
+    let arr = read_npy(&npy_path)?;
+    if arr.shape.len() != 2 || arr.shape[1] != 17 || arr.shape[0] == 0 {
+        return Err(DataError::npy(&npy_path, format!("shape {:?}, expected (N, 17) with N > 0", arr.shape)));
+    }
+    if arr.data.iter().any(|v| !v.is_finite()) {
+        return Err(DataError::npy(&npy_path, "contains NaN or infinite values"));
+    }
+    let n = arr.shape[0];
+    let (img_dir, extra) = image_folder(dir, opts.downscale.max(1))?;
+    let files = list_images(&img_dir)?;
+    if files.len() != n {
+        return Err(DataError::invalid(
+            &img_dir,
+            format!("{} images but {} has {n} rows: counts do not match", files.len(), npy_path.display()),
+        ));
+    }
+    let images = parallel_map(&files, |p| {
+        let (img, _) = read_image(p)?.composite_on_white();
+        Ok(if extra > 1 { img.downscaled(extra) } else { img })
+    })?;
+    let (w, h) = (images[0].width, images[0].height);
+    for (img, p) in images.iter().zip(&files) {
+        if (img.width, img.height) != (w, h) {
+            return Err(DataError::invalid(
+                p,
+                format!("image is {}×{} but {} is {w}×{h}: mixed image sizes", img.width, img.height, files[0].display()),
+            ));
+        }
+    }
+
+    // Poses in f64: reorder [down, right, back] → [right, up, back].
+    let mut poses: Vec<[[f64; 4]; 3]> = Vec::with_capacity(n);
+    let mut hwf = Vec::with_capacity(n);
+    let mut bds = Vec::with_capacity(n);
+    for i in 0..n {
+        let m = |r: usize, c: usize| arr.at2(i, r * 5 + c);
+        let mut p = [[0.0; 4]; 3];
+        for (r, row) in p.iter_mut().enumerate() {
+            *row = [m(r, 1), -m(r, 0), m(r, 2), m(r, 3)];
+        }
+        poses.push(p);
+        hwf.push((m(0, 4), m(1, 4), m(2, 4)));
+        bds.push((arr.at2(i, 15), arr.at2(i, 16)));
+    }
+    for (i, &(hh, ww, f)) in hwf.iter().enumerate() {
+        if !(hh > 0.0 && ww > 0.0 && f > 0.0) {
+            return Err(DataError::npy(&npy_path, format!("row {i}: H, W, focal = {hh}, {ww}, {f} must be positive")));
+        }
+    }
+    let min_bd = bds.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
+    let max_bd = bds.iter().map(|b| b.1).fold(f64::NEG_INFINITY, f64::max);
+    if !(min_bd > 0.0) || max_bd < min_bd {
+        return Err(DataError::npy(&npy_path, format!("depth bounds [{min_bd}, {max_bd}] are not positive and ordered")));
+    }
+    let sc = 1.0 / (min_bd * opts.bd_factor as f64);
+    for p in poses.iter_mut() {
+        for row in p.iter_mut() {
+            row[3] *= sc;
+        }
+    }
+    let avg = average_pose(&poses);
+    let rot_t = [[avg[0][0], avg[1][0], avg[2][0]], [avg[0][1], avg[1][1], avg[2][1]], [avg[0][2], avg[1][2], avg[2][2]]];
+    let c = [avg[0][3], avg[1][3], avg[2][3]];
+    let recentre = |p: &[[f64; 4]; 3]| -> [[f32; 4]; 3] {
+        let mut out = [[0.0f32; 4]; 3];
+        for r in 0..3 {
+            for col in 0..3 {
+                out[r][col] = (0..3).map(|k| rot_t[r][k] * p[k][col]).sum::<f64>() as f32;
+            }
+            out[r][3] = (0..3).map(|k| rot_t[r][k] * (p[k][3] - c[k])).sum::<f64>() as f32;
+        }
+        out
+    };
+
+    let mut views = Vec::with_capacity(n);
+    for (i, (image, path)) in images.into_iter().zip(files).enumerate() {
+        let (h0, w0, f0) = hwf[i];
+        let camera = Camera::new(
+            w,
+            h,
+            (f0 * w as f64 / w0) as f32,
+            (f0 * h as f64 / h0) as f32,
+            0.5 * w as f32,
+            0.5 * h as f32,
+            recentre(&poses[i]),
+        );
+        let depth_range = Some(((bds[i].0 * sc) as f32, (bds[i].1 * sc) as f32));
+        views.push(View { camera, image, mask: None, path, mask_path: None, depth_range });
+    }
+    let hold = opts.llff_hold;
+    let test: Vec<usize> = if hold > 0 { (0..n).step_by(hold).collect() } else { Vec::new() };
+    let train: Vec<usize> = (0..n).filter(|i| !test.contains(i)).collect();
+    let bounds = frustum_bounds(&views);
+    let to_scene = Similarity {
+        scale: sc as f32,
+        rotation: rot_t.map(|r| r.map(|v| v as f32)),
+        translation: std::array::from_fn(|r| -(0..3).map(|k| rot_t[r][k] * c[k]).sum::<f64>() as f32),
+    };
+    Ok(Scene {
+        name: super::folder_name(dir),
+        format: SceneFormat::Llff,
+        root: dir.to_path_buf(),
+        views,
+        val: test.clone(),
+        test,
+        train,
+        near: (min_bd * sc * 0.9) as f32,
+        far: (max_bd * sc) as f32,
+        bounds,
+        per_ray_range: false,
+        to_scene,
+        white_background: false,
+    })
+}
+
+/// The image folder to read and the extra in-memory downscale: `images_N/` when it exists, else
+/// `images/` downscaled by N; with N = 1 and no `images/`, the smallest `images_K/` there is.
+fn image_folder(dir: &Path, factor: u32) -> Result<(PathBuf, u32), DataError> {
+    let full = dir.join("images");
+    if factor > 1 {
+        let exact = dir.join(format!("images_{factor}"));
+        if exact.is_dir() {
+            return Ok((exact, 1));
+        }
+        if full.is_dir() {
+            return Ok((full, factor));
+        }
+        return Err(DataError::missing(&exact, format!("image folder (and no {} to downscale)", full.display())));
+    }
+    if full.is_dir() {
+        return Ok((full, 1));
+    }
+    let mut best: Option<(u32, PathBuf)> = None;
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if let Some(k) = name.strip_prefix("images_").and_then(|k| k.parse::<u32>().ok())
+                && e.path().is_dir()
+                && best.as_ref().is_none_or(|b| k < b.0)
+            {
+                best = Some((k, e.path()));
+            }
+        }
+    }
+    best.map(|(_, p)| (p, 1)).ok_or_else(|| DataError::missing(&full, "image folder (images/ or images_N/)"))
+}
+
+/// NeRF's `poses_avg`: mean centre, summed back and up axes, re-orthonormalized.
+fn average_pose(poses: &[[[f64; 4]; 3]]) -> [[f64; 4]; 3] {
+    let n = poses.len() as f64;
+    let mut center = [0.0; 3];
+    let mut back = [0.0; 3];
+    let mut up = [0.0; 3];
+    for p in poses {
+        for r in 0..3 {
+            center[r] += p[r][3] / n;
+            back[r] += p[r][2];
+            up[r] += p[r][1];
+        }
+    }
+    let z = normalize64(back);
+    let x = normalize64(cross64(up, z));
+    let y = normalize64(cross64(z, x));
+    let mut out = [[0.0; 4]; 3];
+    for r in 0..3 {
+        out[r] = [x[r], y[r], z[r], center[r]];
+    }
+    out
+}
+
+fn normalize64(v: [f64; 3]) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if n > 0.0 { v.map(|x| x / n) } else { v }
+}
+
+fn cross64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// Box around every view's frustum between its near and far depth bounds: the region the
+/// views actually see.
+fn frustum_bounds(views: &[View]) -> Bounds {
+    let mut min = [f32::INFINITY; 3];
+    let mut max = [f32::NEG_INFINITY; 3];
+    for v in views {
+        let c = &v.camera;
+        let (near, far) = v.depth_range.unwrap_or((1.0, 1.0));
+        for depth in [near, far] {
+            for (x, y) in [(0.0, 0.0), (c.width as f32, 0.0), (0.0, c.height as f32), (c.width as f32, c.height as f32)] {
+                let d = c.direction_camera(x, y);
+                let rot = c.rotation();
+                let w = crate::render::geometry::mat3_mul_vec(&rot, d);
+                let p = crate::render::geometry::add(c.origin(), crate::render::geometry::scale(w, depth));
+                for k in 0..3 {
+                    min[k] = min[k].min(p[k]);
+                    max[k] = max[k].max(p[k]);
+                }
+            }
+        }
+    }
+    Bounds::Aabb { min, max }
+}

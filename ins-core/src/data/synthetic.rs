@@ -1,0 +1,558 @@
+//! Small analytic scenes (spheres, boxes, planes, procedural checker textures), ray-cast with
+//! exact depth and masks, and written out in the Blender, LLFF and DTU/IDR formats.
+//!
+//! They prove the geometry: a test writes a scene, reads it back through the real loader, and
+//! checks that the loaded ray of a pixel meets the surface point that was rendered there, at the
+//! depth that was rendered. One sample per pixel, at its centre, so the colour and depth of a
+//! pixel belong to exactly that pixel's ray.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+
+use super::DataError;
+use super::images::{to_u8, write_png};
+use super::npy::{write_npy, write_npz};
+use super::scene::{SceneFormat, Split};
+use crate::render::camera::{Camera, flip_yz, pose_look_at};
+use crate::render::geometry::{
+    Mat3, Similarity, Vec3, add, dot, mat3_mul, mat3_mul_vec, normalize, scale, sub, transpose,
+};
+
+/// A primitive, in the scene's local frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    /// A sphere.
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+    },
+    /// An axis-aligned box.
+    Box {
+        /// Minimum corner.
+        min: Vec3,
+        /// Maximum corner.
+        max: Vec3,
+    },
+    /// An infinite plane.
+    Plane {
+        /// A point on it.
+        point: Vec3,
+        /// Its normal.
+        normal: Vec3,
+    },
+}
+
+/// Surface colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Texture {
+    /// One colour.
+    Solid(Vec3),
+    /// A 3D checkerboard of two colours with cells of side `size` (local units).
+    Checker {
+        /// First colour.
+        a: Vec3,
+        /// Second colour.
+        b: Vec3,
+        /// Cell size.
+        size: f32,
+    },
+}
+
+/// A textured primitive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Object {
+    /// Geometry.
+    pub shape: Shape,
+    /// Colour.
+    pub texture: Texture,
+    /// Whether it counts as foreground in masks and alpha (ground and backdrop planes do not).
+    pub foreground: bool,
+}
+
+/// A set of objects placed in the world by a similarity.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AnalyticScene {
+    /// Objects, in local coordinates.
+    pub objects: Vec<Object>,
+    /// Local → world map.
+    pub to_world: Similarity,
+}
+
+/// The first surface a ray meets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the (unit) world ray.
+    pub t: f32,
+    /// World position.
+    pub point: Vec3,
+    /// Index into [`AnalyticScene::objects`].
+    pub object: usize,
+    /// Shaded colour.
+    pub rgb: Vec3,
+}
+
+/// A ray-cast image with exact per-pixel geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rendering {
+    /// Width.
+    pub width: u32,
+    /// Height.
+    pub height: u32,
+    /// Colour, `h·w·3`; black where nothing is hit.
+    pub rgb: Vec<f32>,
+    /// Distance along the unit world ray of the pixel centre; infinite where nothing is hit.
+    pub depth: Vec<f32>,
+    /// Which object was hit, if any.
+    pub object: Vec<Option<usize>>,
+    /// Whether a foreground object was hit.
+    pub mask: Vec<bool>,
+}
+
+impl Rendering {
+    /// Whether pixel `(x, y)` and its 8 neighbours all see the same foreground object: a pixel
+    /// safely away from silhouettes, for tests.
+    pub fn is_interior(&self, x: u32, y: u32) -> bool {
+        if x == 0 || y == 0 || x + 1 >= self.width || y + 1 >= self.height {
+            return false;
+        }
+        let i = (y * self.width + x) as usize;
+        let Some(o) = self.object[i] else { return false };
+        if !self.mask[i] {
+            return false;
+        }
+        for dy in -1i32..=1 {
+            for dx in -1i32..=1 {
+                let j = ((y as i32 + dy) as u32 * self.width + (x as i32 + dx) as u32) as usize;
+                if self.object[j] != Some(o) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+}
+
+impl AnalyticScene {
+    /// Spheres and boxes inside the unit ball (radius ≤ 0.95), on a ground plane `z = −0.55`
+    /// when `ground` is true; local z is up.
+    pub fn tabletop(ground: bool) -> Self {
+        let red = [0.85, 0.2, 0.15];
+        let white = [0.95, 0.95, 0.9];
+        let mut objects = vec![
+            Object {
+                shape: Shape::Sphere { center: [0.0, 0.0, 0.0], radius: 0.45 },
+                texture: Texture::Checker { a: red, b: white, size: 0.15 },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Box { min: [0.25, 0.15, -0.55], max: [0.6, 0.5, -0.2] },
+                texture: Texture::Checker { a: [0.1, 0.6, 0.2], b: [0.9, 0.8, 0.2], size: 0.1 },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Sphere { center: [-0.45, 0.35, -0.3], radius: 0.2 },
+                texture: Texture::Solid([0.15, 0.3, 0.9]),
+                foreground: true,
+            },
+        ];
+        if ground {
+            objects.push(Object {
+                shape: Shape::Plane { point: [0.0, 0.0, -0.55], normal: [0.0, 0.0, 1.0] },
+                texture: Texture::Checker { a: [0.35, 0.3, 0.25], b: [0.6, 0.55, 0.5], size: 0.25 },
+                foreground: false,
+            });
+        }
+        AnalyticScene { objects, to_world: Similarity::identity() }
+    }
+
+    /// A forward-facing arrangement for LLFF: objects 3–6 units down −z (local), a ground plane
+    /// `y = −1.5` and a backdrop `z = −8`, so every ray from near the origin hits something.
+    pub fn forward_facing() -> Self {
+        let objects = vec![
+            Object {
+                shape: Shape::Sphere { center: [0.0, 0.0, -4.0], radius: 0.8 },
+                texture: Texture::Checker { a: [0.85, 0.2, 0.15], b: [0.95, 0.95, 0.9], size: 0.25 },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Box { min: [-1.8, -1.5, -5.5], max: [-0.8, 0.2, -4.5] },
+                texture: Texture::Checker { a: [0.1, 0.6, 0.2], b: [0.9, 0.8, 0.2], size: 0.3 },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Sphere { center: [1.3, 0.6, -3.2], radius: 0.5 },
+                texture: Texture::Solid([0.15, 0.3, 0.9]),
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Plane { point: [0.0, -1.5, 0.0], normal: [0.0, 1.0, 0.0] },
+                texture: Texture::Checker { a: [0.35, 0.3, 0.25], b: [0.6, 0.55, 0.5], size: 0.5 },
+                foreground: false,
+            },
+            Object {
+                shape: Shape::Plane { point: [0.0, 0.0, -8.0], normal: [0.0, 0.0, 1.0] },
+                texture: Texture::Checker { a: [0.5, 0.6, 0.8], b: [0.8, 0.85, 0.95], size: 0.7 },
+                foreground: false,
+            },
+        ];
+        AnalyticScene { objects, to_world: Similarity::identity() }
+    }
+
+    /// First hit of the world ray `o + t·d` (unit `d`, `t > 0`).
+    pub fn trace(&self, o: Vec3, d: Vec3) -> Option<Hit> {
+        let s = &self.to_world;
+        let rt = transpose(&s.rotation);
+        let ol = scale(mat3_mul_vec(&rt, sub(o, s.translation)), 1.0 / s.scale);
+        let dl = mat3_mul_vec(&rt, d);
+        let mut best: Option<(f32, usize, Vec3)> = None;
+        for (i, obj) in self.objects.iter().enumerate() {
+            if let Some((t, n)) = intersect(&obj.shape, ol, dl)
+                && best.is_none_or(|b| t < b.0)
+            {
+                best = Some((t, i, n));
+            }
+        }
+        let (tl, i, n) = best?;
+        let pl = add(ol, scale(dl, tl));
+        let n = if dot(n, dl) > 0.0 { scale(n, -1.0) } else { n };
+        let light = normalize([0.3, 0.5, 0.8]);
+        let shade = 0.45 + 0.55 * dot(n, light).max(0.0);
+        let base = match self.objects[i].texture {
+            Texture::Solid(c) => c,
+            Texture::Checker { a, b, size } => {
+                let k = (pl[0] / size).floor() + (pl[1] / size).floor() + (pl[2] / size).floor();
+                if (k as i64).rem_euclid(2) == 0 { a } else { b }
+            }
+        };
+        Some(Hit { t: tl * s.scale, point: s.apply_point(pl), object: i, rgb: scale(base, shade) })
+    }
+
+    /// Ray-casts the scene through every pixel centre of `camera`.
+    pub fn render(&self, camera: &Camera) -> Rendering {
+        let n = (camera.width * camera.height) as usize;
+        let mut r = Rendering {
+            width: camera.width,
+            height: camera.height,
+            rgb: vec![0.0; n * 3],
+            depth: vec![f32::INFINITY; n],
+            object: vec![None; n],
+            mask: vec![false; n],
+        };
+        for v in 0..camera.height {
+            for u in 0..camera.width {
+                let i = (v * camera.width + u) as usize;
+                let (o, d) = camera.pixel_ray(u, v);
+                if let Some(h) = self.trace(o, d) {
+                    r.rgb[i * 3..i * 3 + 3].copy_from_slice(&h.rgb);
+                    r.depth[i] = h.t;
+                    r.object[i] = Some(h.object);
+                    r.mask[i] = self.objects[h.object].foreground;
+                }
+            }
+        }
+        r
+    }
+}
+
+/// Ray–shape intersection in local coordinates: nearest `t > ε` and the outward normal there.
+fn intersect(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f32, Vec3)> {
+    const EPS: f32 = 1e-5;
+    match *shape {
+        Shape::Sphere { center, radius } => {
+            let oc = sub(o, center);
+            let b = dot(oc, d);
+            let c = dot(oc, oc) - radius * radius;
+            let disc = b * b - dot(d, d) * c;
+            if disc < 0.0 {
+                return None;
+            }
+            let s = disc.sqrt();
+            let a = dot(d, d);
+            let t = [(-b - s) / a, (-b + s) / a].into_iter().find(|&t| t > EPS)?;
+            Some((t, normalize(sub(add(o, scale(d, t)), center))))
+        }
+        Shape::Box { min, max } => {
+            let (mut t0, mut t1) = (f32::NEG_INFINITY, f32::INFINITY);
+            let (mut n0, mut n1) = ([0.0; 3], [0.0; 3]);
+            for k in 0..3 {
+                if d[k].abs() < 1e-12 {
+                    if o[k] < min[k] || o[k] > max[k] {
+                        return None;
+                    }
+                    continue;
+                }
+                let (a, b) = ((min[k] - o[k]) / d[k], (max[k] - o[k]) / d[k]);
+                let (near, far, sn) = if a < b { (a, b, -1.0) } else { (b, a, 1.0) };
+                if near > t0 {
+                    t0 = near;
+                    n0 = [0.0; 3];
+                    n0[k] = sn;
+                }
+                if far < t1 {
+                    t1 = far;
+                    n1 = [0.0; 3];
+                    n1[k] = -sn;
+                }
+            }
+            if t0 > t1 {
+                return None;
+            }
+            if t0 > EPS {
+                Some((t0, n0))
+            } else if t1 > EPS {
+                Some((t1, n1))
+            } else {
+                None
+            }
+        }
+        Shape::Plane { point, normal } => {
+            let denom = dot(d, normal);
+            if denom.abs() < 1e-9 {
+                return None;
+            }
+            let t = dot(sub(point, o), normal) / denom;
+            (t > EPS).then(|| (t, normalize(normal)))
+        }
+    }
+}
+
+/// Size and count of a generated scene.
+#[derive(Clone, Copy, Debug)]
+pub struct SynthOptions {
+    /// Image width in pixels (height is the same for Blender, 3/4 of it for LLFF and DTU).
+    pub size: u32,
+    /// Number of views (Blender: training views; val and test get `max(1, views/4)` each).
+    pub views: usize,
+}
+
+impl Default for SynthOptions {
+    fn default() -> Self {
+        SynthOptions { size: 64, views: 10 }
+    }
+}
+
+/// The ground truth of one written view.
+#[derive(Clone, Debug)]
+pub struct SynthView {
+    /// Camera in the written world frame (our OpenGL convention).
+    pub camera: Camera,
+    /// Split it was written to (Blender); LLFF and DTU write [`Split::Train`] here and leave
+    /// the holdout to the loader.
+    pub split: Split,
+    /// The image file written.
+    pub image_path: PathBuf,
+    /// Its exact rendering.
+    pub render: Rendering,
+    /// Smallest and largest z-depth over the pixels that hit something.
+    pub depth_bounds: (f32, f32),
+}
+
+/// Everything a test needs to check a written scene: the analytic scene in the written world
+/// frame and each view's camera and rendering, in the order the loader will list them.
+#[derive(Clone, Debug)]
+pub struct SynthScene {
+    /// Format written.
+    pub format: SceneFormat,
+    /// Folder written.
+    pub dir: PathBuf,
+    /// The analytic scene (its `to_world` maps into the written world frame).
+    pub scene: AnalyticScene,
+    /// The views, in loader order.
+    pub views: Vec<SynthView>,
+}
+
+/// Writes a small analytic scene in `format` into `dir` (created if needed).
+pub fn write(format: SceneFormat, dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataError> {
+    match format {
+        SceneFormat::Blender => write_blender(dir, opts),
+        SceneFormat::Llff => write_llff(dir, opts),
+        SceneFormat::Dtu => write_dtu(dir, opts),
+    }
+}
+
+fn create_dir(dir: &Path) -> Result<(), DataError> {
+    std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))
+}
+
+fn z_depth_bounds(camera: &Camera, r: &Rendering) -> (f32, f32) {
+    let (mut lo, mut hi) = (f32::INFINITY, 0.0f32);
+    for v in 0..r.height {
+        for u in 0..r.width {
+            let t = r.depth[(v * r.width + u) as usize];
+            if t.is_finite() {
+                let (o, d) = camera.pixel_ray(u, v);
+                if let Some(z) = camera.depth_of(add(o, scale(d, t))) {
+                    lo = lo.min(z);
+                    hi = hi.max(z);
+                }
+            }
+        }
+    }
+    (lo, hi)
+}
+
+/// Rotation by `angle` radians about unit `axis`.
+fn axis_angle(axis: Vec3, angle: f32) -> Mat3 {
+    let [x, y, z] = normalize(axis);
+    let (s, c) = angle.sin_cos();
+    let t = 1.0 - c;
+    [
+        [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+        [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+        [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
+    ]
+}
+
+/// NeRF-synthetic: cameras on a sphere of radius 4 around the origin (z up), looking at it,
+/// `camera_angle_x` 0.6911 (the lego value), RGBA images with alpha 0 on the background.
+pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataError> {
+    let scene = AnalyticScene::tabletop(false);
+    let size = opts.size.max(8);
+    let fov = 0.691_111_2f32;
+    let n_other = (opts.views / 4).max(1);
+    let mut views = Vec::new();
+    for (split, count, phase) in [(Split::Train, opts.views.max(1), 0.0f32), (Split::Val, n_other, 0.37), (Split::Test, n_other, 0.71)] {
+        let sub_dir = dir.join(split.to_string());
+        create_dir(&sub_dir)?;
+        let mut frames = Vec::new();
+        for i in 0..count {
+            let az = (i as f32 + phase) * 2.399_963 + phase;
+            let el = (10.0 + 50.0 * ((i as f32 + 0.5 + phase) / count as f32).fract()).to_radians();
+            let eye = scale([el.cos() * az.cos(), el.cos() * az.sin(), el.sin()], 4.0);
+            let camera = Camera::from_fov_x(size, size, fov, pose_look_at(eye, [0.0; 3], [0.0, 0.0, 1.0]));
+            let render = scene.render(&camera);
+            let mut rgba = Vec::with_capacity((size * size * 4) as usize);
+            for (k, &m) in render.mask.iter().enumerate() {
+                if m {
+                    rgba.extend(render.rgb[k * 3..k * 3 + 3].iter().map(|&v| to_u8(v)));
+                    rgba.push(255);
+                } else {
+                    rgba.extend([0, 0, 0, 0]);
+                }
+            }
+            let image_path = sub_dir.join(format!("r_{i}.png"));
+            write_png(&image_path, size, size, 4, &rgba)?;
+            let c = &camera.c2w;
+            frames.push(json!({
+                "file_path": format!("./{split}/r_{i}"),
+                "rotation": 0.0,
+                "transform_matrix": [c[0], c[1], c[2], [0.0, 0.0, 0.0, 1.0]],
+            }));
+            let depth_bounds = z_depth_bounds(&camera, &render);
+            views.push(SynthView { camera, split, image_path, render, depth_bounds });
+        }
+        let path = dir.join(format!("transforms_{split}.json"));
+        let text = serde_json::to_string_pretty(&json!({ "camera_angle_x": fov, "frames": frames }))
+            .map_err(|e| DataError::json(&path, e.to_string()))?;
+        std::fs::write(&path, text).map_err(|e| DataError::io(&path, e))?;
+    }
+    Ok(SynthScene { format: SceneFormat::Blender, dir: dir.to_path_buf(), scene, views })
+}
+
+/// LLFF: a grid of roughly parallel cameras looking down local −z at [`AnalyticScene::forward_facing`],
+/// all placed in a world frame rotated, scaled (×2.5) and shifted from the local one, written as
+/// `poses_bounds.npy` ([down, right, back] columns, H, W, focal, then the z-depth range each
+/// view sees) and `images/imageNNN.png`.
+pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataError> {
+    let mut scene = AnalyticScene::forward_facing();
+    scene.to_world = Similarity { scale: 2.5, rotation: axis_angle([0.3, 1.0, 0.2], 0.5), translation: [3.0, -1.0, 2.0] };
+    let w = opts.size.max(8);
+    let h = (w * 3 / 4).max(6);
+    let focal = 0.9 * w as f32;
+    let img_dir = dir.join("images");
+    create_dir(&img_dir)?;
+    let n = opts.views.max(1);
+    let cols = (n as f32).sqrt().ceil() as usize;
+    let mut views = Vec::new();
+    let mut rows = Vec::with_capacity(n * 17);
+    for i in 0..n {
+        let (gx, gy) = ((i % cols) as f32, (i / cols) as f32);
+        let eye_l = [0.25 * gx - 0.125 * (cols as f32 - 1.0), 0.2 * gy - 0.1 * ((n / cols) as f32), 0.03 * (i % 3) as f32];
+        let target_l = [0.05 * (i % 2) as f32, 0.0, -5.0];
+        let pose_l = pose_look_at(eye_l, target_l, [0.0, 1.0, 0.0]);
+        let s = &scene.to_world;
+        let rot_l = pose_l.map(|r| [r[0], r[1], r[2]]);
+        let rot_w = mat3_mul(&s.rotation, &rot_l);
+        let eye_w = s.apply_point(eye_l);
+        let c2w: [[f32; 4]; 3] = std::array::from_fn(|r| [rot_w[r][0], rot_w[r][1], rot_w[r][2], eye_w[r]]);
+        let camera = Camera::new(w, h, focal, focal, 0.5 * w as f32, 0.5 * h as f32, c2w);
+        let render = scene.render(&camera);
+        let image_path = img_dir.join(format!("image{i:03}.png"));
+        let rgb: Vec<u8> = render.rgb.iter().map(|&v| to_u8(v)).collect();
+        write_png(&image_path, w, h, 3, &rgb)?;
+        let depth_bounds = z_depth_bounds(&camera, &render);
+        // LLFF columns: [down, right, back, t, hwf] = [−up, right, back, t, hwf].
+        for r in 0..3 {
+            let hwf = [h as f32, w as f32, focal][r];
+            rows.extend([-c2w[r][1], c2w[r][0], c2w[r][2], c2w[r][3], hwf].map(f64::from));
+        }
+        rows.extend([depth_bounds.0 as f64, depth_bounds.1 as f64]);
+        views.push(SynthView { camera, split: Split::Train, image_path, render, depth_bounds });
+    }
+    write_npy(&dir.join("poses_bounds.npy"), &[n, 17], &rows)?;
+    Ok(SynthScene { format: SceneFormat::Llff, dir: dir.to_path_buf(), scene, views })
+}
+
+/// DTU / IDR: [`AnalyticScene::tabletop`] (unit-sphere frame, objects foreground, ground not)
+/// placed by `scale_mat` (×30, shifted) in a world frame; cameras 2.6 units from the centre on
+/// an arc above the table, with skewed, off-centre intrinsics; `world_mat_i = 1.7 · K·[R | t]`
+/// (OpenCV axes, an arbitrary homogeneous scale), `image/NNNNNN.png`, `mask/NNN.png` (0/255 RGB).
+pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataError> {
+    let mut scene = AnalyticScene::tabletop(true);
+    let world_scale = 30.0f32;
+    let shift = [12.0f32, -3.0, 40.0];
+    scene.to_world = Similarity { scale: world_scale, rotation: Similarity::identity().rotation, translation: shift };
+    let w = opts.size.max(8);
+    let h = (w * 3 / 4).max(6);
+    let (fx, fy, cx, cy, skew) = (1.1 * w as f32, 1.12 * w as f32, 0.5 * w as f32 + 1.5, 0.5 * h as f32 - 1.0, 0.3f32);
+    let img_dir = dir.join("image");
+    let mask_dir = dir.join("mask");
+    create_dir(&img_dir)?;
+    create_dir(&mask_dir)?;
+    let n = opts.views.max(1);
+    let lambda = 1.7f64;
+    let mut arrays = Vec::new();
+    let mut views = Vec::new();
+    for i in 0..n {
+        let az = (-60.0 + 150.0 * i as f32 / n as f32).to_radians();
+        let el = (25.0 + 20.0 * (i % 3) as f32).to_radians();
+        let eye_l = scale([el.cos() * az.cos(), el.cos() * az.sin(), el.sin()], 2.6);
+        let pose_l = pose_look_at(eye_l, [0.0, 0.0, -0.1], [0.0, 0.0, 1.0]);
+        let eye_w = scene.to_world.apply_point(eye_l);
+        let c2w: [[f32; 4]; 3] = std::array::from_fn(|r| [pose_l[r][0], pose_l[r][1], pose_l[r][2], eye_w[r]]);
+        let camera = Camera { width: w, height: h, fx, fy, cx, cy, skew, c2w };
+        let render = scene.render(&camera);
+        let image_path = img_dir.join(format!("{i:06}.png"));
+        let rgb: Vec<u8> = render.rgb.iter().map(|&v| to_u8(v)).collect();
+        write_png(&image_path, w, h, 3, &rgb)?;
+        let mask: Vec<u8> = render.mask.iter().flat_map(|&m| [if m { 255 } else { 0 }; 3]).collect();
+        write_png(&mask_dir.join(format!("{i:03}.png")), w, h, 3, &mask)?;
+        // OpenCV world-to-camera: R = (c2w · diag(1, −1, −1))ᵀ, t = −R·C.
+        let cv = flip_yz(&c2w);
+        let r: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| cv[b][a] as f64));
+        let cc = [eye_w[0] as f64, eye_w[1] as f64, eye_w[2] as f64];
+        let t: [f64; 3] = std::array::from_fn(|a| -(r[a][0] * cc[0] + r[a][1] * cc[1] + r[a][2] * cc[2]));
+        let k = [[fx as f64, skew as f64, cx as f64], [0.0, fy as f64, cy as f64], [0.0, 0.0, 1.0]];
+        let mut world = vec![0.0f64; 16];
+        for a in 0..3 {
+            for b in 0..4 {
+                let rt = |m: usize| if b < 3 { r[m][b] } else { t[m] };
+                world[a * 4 + b] = lambda * (0..3).map(|m| k[a][m] * rt(m)).sum::<f64>();
+            }
+        }
+        world[15] = 1.0;
+        let s = world_scale as f64;
+        let scale_mat = vec![
+            s, 0.0, 0.0, shift[0] as f64, 0.0, s, 0.0, shift[1] as f64, 0.0, 0.0, s, shift[2] as f64, 0.0, 0.0, 0.0, 1.0,
+        ];
+        arrays.push((format!("world_mat_{i}"), vec![4, 4], world));
+        arrays.push((format!("scale_mat_{i}"), vec![4, 4], scale_mat));
+        let depth_bounds = z_depth_bounds(&camera, &render);
+        views.push(SynthView { camera, split: Split::Train, image_path, render, depth_bounds });
+    }
+    write_npz(&dir.join("cameras.npz"), &arrays)?;
+    Ok(SynthScene { format: SceneFormat::Dtu, dir: dir.to_path_buf(), scene, views })
+}

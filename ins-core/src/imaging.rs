@@ -1,0 +1,130 @@
+//! Between image files, RGB buffers and tensors.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use burn::prelude::*;
+
+/// An RGB image as f32 in [0, 1], row-major, 3 values per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbImage {
+    /// Width.
+    pub width: usize,
+    /// Height.
+    pub height: usize,
+    /// `height·width·3` values.
+    pub data: Vec<f32>,
+}
+
+impl RgbImage {
+    /// Reads a PNG or JPEG (any colour type; alpha is dropped) and names the file on error.
+    pub fn load(path: &Path) -> Result<Self> {
+        if !path.exists() {
+            bail!("image not found: {}", path.display());
+        }
+        let img = image::ImageReader::open(path)
+            .with_context(|| format!("opening {}", path.display()))?
+            .with_guessed_format()
+            .with_context(|| format!("reading {}", path.display()))?
+            .decode()
+            .map_err(|e| anyhow::anyhow!("{} is not a readable image: {e}", path.display()))?;
+        Ok(Self::from_dynamic(&img))
+    }
+
+    /// From a decoded image.
+    pub fn from_dynamic(img: &image::DynamicImage) -> Self {
+        let rgb = img.to_rgb32f();
+        Self {
+            width: rgb.width() as usize,
+            height: rgb.height() as usize,
+            data: rgb.into_raw(),
+        }
+    }
+
+    /// Resized (Lanczos) to `width`×`height`.
+    pub fn resized(&self, width: usize, height: usize) -> Self {
+        if width == self.width && height == self.height {
+            return self.clone();
+        }
+        let buf = image::Rgb32FImage::from_raw(self.width as u32, self.height as u32, self.data.clone())
+            .expect("buffer matches its size");
+        let out = image::imageops::resize(&buf, width as u32, height as u32, image::imageops::FilterType::Lanczos3);
+        Self {
+            width,
+            height,
+            data: out.into_raw().into_iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+        }
+    }
+
+    /// Resized so that the longer side is `max_side` (aspect kept).
+    pub fn fit_within(&self, max_side: usize) -> Self {
+        let scale = max_side as f64 / self.width.max(self.height) as f64;
+        let w = ((self.width as f64 * scale).round() as usize).max(1);
+        let h = ((self.height as f64 * scale).round() as usize).max(1);
+        self.resized(w, h)
+    }
+
+    /// `[1, 3, H, W]` tensor.
+    pub fn to_tensor(&self, device: &Device) -> Tensor<4> {
+        Tensor::<1>::from_data(TensorData::new(self.data.clone(), [self.data.len()]), device)
+            .reshape([1, self.height, self.width, 3])
+            .permute([0, 3, 1, 2])
+    }
+
+    /// From an `[H, W, 3]` tensor.
+    pub fn from_hwc(t: Tensor<3>) -> Result<Self> {
+        let [h, w, c] = t.dims();
+        if c != 3 {
+            bail!("expected 3 channels, got {c}");
+        }
+        let data = t
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .map_err(|e| anyhow::anyhow!("reading tensor: {e:?}"))?;
+        Ok(Self {
+            width: w,
+            height: h,
+            data,
+        })
+    }
+
+    /// Saves as PNG (or any format the extension names).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        if let Some(dir) = path.parent()
+            && !dir.as_os_str().is_empty()
+        {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        let bytes: Vec<u8> = self
+            .data
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
+        image::RgbImage::from_raw(self.width as u32, self.height as u32, bytes)
+            .context("image size")?
+            .save(path)
+            .with_context(|| format!("writing {}", path.display()))
+    }
+
+    /// Side-by-side strip of images of the same height.
+    pub fn hstack(images: &[RgbImage]) -> Self {
+        let height = images.iter().map(|i| i.height).max().unwrap_or(0);
+        let width: usize = images.iter().map(|i| i.width).sum();
+        let mut data = vec![1.0f32; width * height * 3];
+        let mut x0 = 0;
+        for img in images {
+            for y in 0..img.height {
+                let src = &img.data[y * img.width * 3..(y + 1) * img.width * 3];
+                let dst = (y * width + x0) * 3;
+                data[dst..dst + img.width * 3].copy_from_slice(src);
+            }
+            x0 += img.width;
+        }
+        Self {
+            width,
+            height,
+            data,
+        }
+    }
+}

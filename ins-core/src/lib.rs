@@ -1,0 +1,15 @@
+//! INS-rs core: the parts every stylized implicit representation shares.
+//!
+//! Data flows one way: [`data`] (posed images) → [`render`] (cameras, rays, samplers,
+//! renderers) → [`modules`] (SIM / CIM / AM) → [`loss`] → [`train`] (the one trainer).
+//! [`backend`] picks the compute device at run time; [`imaging`] and [`viz`] turn tensors into
+//! pictures.
+
+pub mod backend;
+pub mod data;
+pub mod imaging;
+pub mod loss;
+pub mod modules;
+pub mod render;
+pub mod train;
+pub mod viz;

@@ -1,0 +1,14 @@
+//! Loss terms: Gram-matrix style loss, VGG content loss, pixel MSE and PSNR.
+//!
+//! Style: Σ over relu1_2, relu2_2, relu3_3, relu4_3 of mean((G(x) − G(s))²) with
+//! G = F Fᵀ / (C·H·W). Content: mean((relu2_2(x) − relu2_2(c))²).
+
+pub mod gram;
+pub mod perceptual;
+pub mod pixel;
+pub mod weights;
+
+pub use gram::gram;
+pub use perceptual::{StyleTarget, content_loss, style_loss};
+pub use pixel::{mse, psnr};
+pub use weights::LossWeights;

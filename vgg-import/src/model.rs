@@ -1,0 +1,153 @@
+//! The VGG-16 feature extractor up to relu4_3, as a Burn module (so it caches in Burn's format).
+
+use burn::module::Param;
+use burn::prelude::*;
+use burn::tensor::activation::relu;
+use burn::tensor::module::{conv2d, max_pool2d};
+use burn::tensor::ops::{ConvOptions, MaxPoolOptions};
+
+use crate::onnx::{VGG16_CHANNELS, VggWeights};
+use crate::preprocess::Preprocess;
+
+/// One 3×3, pad-1 convolution.
+#[derive(Module, Debug)]
+pub struct VggConv {
+    /// `[out, in, 3, 3]`.
+    pub weight: Param<Tensor<4>>,
+    /// `[out]`.
+    pub bias: Param<Tensor<1>>,
+}
+
+/// The first ten convolutions of VGG-16.
+#[derive(Module, Debug)]
+pub struct Vgg16Features {
+    /// Convolutions in layer order.
+    pub convs: Vec<VggConv>,
+}
+
+/// The activations the losses use.
+#[derive(Clone, Debug)]
+pub struct VggFeatures {
+    /// After conv1_2.
+    pub relu1_2: Tensor<4>,
+    /// After conv2_2 (the content layer).
+    pub relu2_2: Tensor<4>,
+    /// After conv3_3.
+    pub relu3_3: Tensor<4>,
+    /// After conv4_3.
+    pub relu4_3: Tensor<4>,
+}
+
+impl VggFeatures {
+    /// The four style layers, shallow to deep.
+    pub fn style_layers(&self) -> [&Tensor<4>; 4] {
+        [&self.relu1_2, &self.relu2_2, &self.relu3_3, &self.relu4_3]
+    }
+
+    /// Layer names in the order of [`VggFeatures::style_layers`].
+    pub const NAMES: [&'static str; 4] = ["relu1_2", "relu2_2", "relu3_3", "relu4_3"];
+}
+
+impl Vgg16Features {
+    /// A module of the right shapes filled with zeros (to load a cached record into).
+    pub fn zeros(device: &Device) -> Self {
+        let convs = (0..10)
+            .map(|i| {
+                let c_in = if i == 0 { 3 } else { VGG16_CHANNELS[i - 1] };
+                let c_out = VGG16_CHANNELS[i];
+                VggConv {
+                    weight: Param::from_tensor(Tensor::zeros([c_out, c_in, 3, 3], device)),
+                    bias: Param::from_tensor(Tensor::zeros([c_out], device)),
+                }
+            })
+            .collect();
+        Self { convs }
+    }
+
+    /// The module holding `weights`, frozen (gradients still flow to the input).
+    pub fn from_weights(weights: &VggWeights, device: &Device) -> Self {
+        let convs = weights
+            .convs
+            .iter()
+            .map(|(w, b)| VggConv {
+                weight: Param::from_tensor(Tensor::from_data(w.clone(), device)),
+                bias: Param::from_tensor(Tensor::from_data(b.clone(), device)),
+            })
+            .collect();
+        Self { convs }.no_grad()
+    }
+
+    /// Runs a preprocessed `[B, 3, H, W]` batch to relu4_3.
+    pub fn forward(&self, x: Tensor<4>) -> VggFeatures {
+        let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+        let conv = |i: usize, x: Tensor<4>| {
+            let c = &self.convs[i];
+            relu(conv2d(x, c.weight.val(), Some(c.bias.val()), opts.clone()))
+        };
+        let pool = |x: Tensor<4>| max_pool2d(x, MaxPoolOptions::new([2, 2]).with_stride([2, 2]));
+        let x = conv(0, x);
+        let relu1_2 = conv(1, x);
+        let x = conv(2, pool(relu1_2.clone()));
+        let relu2_2 = conv(3, x);
+        let x = conv(4, pool(relu2_2.clone()));
+        let x = conv(5, x);
+        let relu3_3 = conv(6, x);
+        let x = conv(7, pool(relu3_3.clone()));
+        let x = conv(8, x);
+        let relu4_3 = conv(9, x);
+        VggFeatures {
+            relu1_2,
+            relu2_2,
+            relu3_3,
+            relu4_3,
+        }
+    }
+}
+
+/// A ready feature extractor with its preprocessing.
+#[derive(Clone, Debug)]
+pub struct Vgg {
+    /// The convolutions.
+    pub net: Vgg16Features,
+    /// The input convention of these weights.
+    pub preprocess: Preprocess,
+}
+
+impl Vgg {
+    /// Features of an RGB batch in [0, 1], `[B, 3, H, W]`.
+    pub fn features(&self, rgb: Tensor<4>) -> VggFeatures {
+        self.net.forward(self.preprocess.apply(rgb))
+    }
+
+    /// The same extractor on another device.
+    pub fn to_device(&self, device: &Device) -> Self {
+        Self {
+            net: self.net.clone().to_device(device).no_grad(),
+            preprocess: self.preprocess,
+        }
+    }
+}
+
+impl Vgg16Features {
+    /// Random (He-initialised) weights of VGG-16's shapes, for benchmarks and tests that must
+    /// not depend on downloaded weights.
+    pub fn random(device: &Device) -> Self {
+        use burn::tensor::Distribution;
+        let convs = (0..10)
+            .map(|i| {
+                let c_in = if i == 0 { 3 } else { VGG16_CHANNELS[i - 1] };
+                let c_out = VGG16_CHANNELS[i];
+                let std = (2.0 / (9.0 * c_in as f64)).sqrt();
+                VggConv {
+                    weight: Param::from_tensor(Tensor::random(
+                        [c_out, c_in, 3, 3],
+                        Distribution::Normal(0.0, std),
+                        device,
+                    )),
+                    bias: Param::from_tensor(Tensor::zeros([c_out], device)),
+                }
+            })
+            .collect();
+        Self { convs }.no_grad()
+    }
+}
