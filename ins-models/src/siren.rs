@@ -178,9 +178,7 @@ pub fn train(
         stride: cfg.effective_stride(content.width, content.height),
     };
     let ad = device.clone().autodiff();
-    device.seed(cfg.seed);
-    ad.seed(cfg.seed);
-    let model = cfg.build_model(&ad);
+    let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || cfg.build_model(&ad));
     let vgg = vgg.to_device(&ad);
     let mut task = ImageTask::new(content.clone(), &styles, cfg.style_size, vgg, cfg.fit_batch, patch, &ad);
     let trainer = Trainer::new(cfg.phases(weights), opts);

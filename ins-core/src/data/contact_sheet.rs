@@ -1,6 +1,7 @@
 //! A contact sheet: thumbnails of a scene's views with the bounding volume projected into each,
 //! so a glance shows whether cameras and volume agree (the outline should sit on the object in
-//! every thumbnail). Background pixels of masked views are dimmed.
+//! every thumbnail). Where masks come from their own files (DTU), background pixels are dimmed;
+//! alpha-composited images (Blender) show as loaded, on white.
 
 use super::images::Image;
 use super::scene::Scene;
@@ -27,7 +28,7 @@ pub fn contact_sheet(scene: &Scene, max_views: usize, thumb_width: u32) -> Image
     for (k, &vi) in picks.iter().enumerate() {
         let view = &scene.views[vi];
         let mut thumb = view.image.resized(tw, th);
-        if let Some(m) = &view.mask {
+        if let (Some(m), Some(_)) = (&view.mask, &view.mask_path) {
             for y in 0..th {
                 for x in 0..tw {
                     let mx = (x as u64 * m.width as u64 / tw as u64) as u32;

@@ -4,11 +4,12 @@
 //!
 //! `P = (world_mat_i · scale_mat_i)[:3]` maps unit-sphere coordinates to pixels; it is split by
 //! an RQ decomposition into intrinsics `K` (positive diagonal, `K[2][2] = 1`) and the pose,
-//! which is converted from OpenCV to OpenGL axes. The scene frame is the unit-sphere frame; every
+//! which is converted from OpenCV to OpenGL axes (and pixel-centre conventions: see
+//! [`Decomposed::camera`]). The scene frame is the unit-sphere frame; every
 //! view trains (IDR/NeuS use all views), val and test are empty.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::DataError;
 use super::images::{list_images, parallel_map, read_image, read_mask};
@@ -66,7 +67,10 @@ pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Option<Decomposed> {
 }
 
 impl Decomposed {
-    /// The camera for an image of `width`×`height`, in our OpenGL convention.
+    /// The camera for an image of `width`×`height`, in our OpenGL convention. OpenCV
+    /// intrinsics put pixel centres at integer coordinates (IDR and NeuS cast the ray of pixel
+    /// `(u, v)` through `K⁻¹·[u, v, 1]`); ours put them at `+0.5`, so `cx` and `cy` shift by half a
+    /// pixel and the ray of each pixel stays the same.
     pub fn camera(&self, width: u32, height: u32) -> Camera {
         let r = &self.r;
         // c2w rotation (OpenCV) = Rᵀ; OpenGL flips the y and z columns.
@@ -80,8 +84,8 @@ impl Decomposed {
             height,
             fx: k[0][0] as f32,
             fy: k[1][1] as f32,
-            cx: k[0][2] as f32,
-            cy: k[1][2] as f32,
+            cx: (k[0][2] + 0.5) as f32,
+            cy: (k[1][2] + 0.5) as f32,
             skew: k[0][1] as f32,
             c2w,
         }
@@ -211,7 +215,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
 }
 
 /// A 4×4 (or 3×4, completed with `[0, 0, 0, 1]`) matrix from the archive.
-fn matrix(npz: &BTreeMap<String, Array>, path: &PathBuf, name: &str) -> Result<[[f64; 4]; 4], DataError> {
+fn matrix(npz: &BTreeMap<String, Array>, path: &Path, name: &str) -> Result<[[f64; 4]; 4], DataError> {
     let a = npz.get(name).ok_or_else(|| DataError::invalid(path, format!("{name} missing")))?;
     if a.shape.len() != 2 || a.shape[1] != 4 || !(a.shape[0] == 3 || a.shape[0] == 4) {
         return Err(DataError::npy(path, format!("{name} has shape {:?}, expected (4, 4) or (3, 4)", a.shape)));
@@ -220,9 +224,9 @@ fn matrix(npz: &BTreeMap<String, Array>, path: &PathBuf, name: &str) -> Result<[
         return Err(DataError::npy(path, format!("{name} contains NaN or infinite values")));
     }
     let mut m = [[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
-    for r in 0..a.shape[0] {
-        for c in 0..4 {
-            m[r][c] = a.at2(r, c);
+    for (r, row) in m.iter_mut().enumerate().take(a.shape[0]) {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = a.at2(r, c);
         }
     }
     Ok(m)

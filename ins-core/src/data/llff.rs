@@ -73,7 +73,8 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     }
     let min_bd = bds.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
     let max_bd = bds.iter().map(|b| b.1).fold(f64::NEG_INFINITY, f64::max);
-    if !(min_bd > 0.0) || max_bd < min_bd {
+    // All values are finite (checked above), so plain comparisons suffice.
+    if min_bd <= 0.0 || max_bd < min_bd {
         return Err(DataError::npy(&npy_path, format!("depth bounds [{min_bd}, {max_bd}] are not positive and ordered")));
     }
     let sc = 1.0 / (min_bd * opts.bd_factor as f64);

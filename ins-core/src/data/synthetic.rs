@@ -535,7 +535,8 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
         let r: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| cv[b][a] as f64));
         let cc = [eye_w[0] as f64, eye_w[1] as f64, eye_w[2] as f64];
         let t: [f64; 3] = std::array::from_fn(|a| -(r[a][0] * cc[0] + r[a][1] * cc[1] + r[a][2] * cc[2]));
-        let k = [[fx as f64, skew as f64, cx as f64], [0.0, fy as f64, cy as f64], [0.0, 0.0, 1.0]];
+        // OpenCV pixel centres are at integers, ours at +0.5.
+        let k = [[fx as f64, skew as f64, cx as f64 - 0.5], [0.0, fy as f64, cy as f64 - 0.5], [0.0, 0.0, 1.0]];
         let mut world = vec![0.0f64; 16];
         for a in 0..3 {
             for b in 0..4 {

@@ -101,14 +101,15 @@ pub fn average_pose(cameras: &[Camera]) -> [[f32; 4]; 3] {
     pose_from_back_up(back, up, center)
 }
 
-/// Smooth path through key cameras: `per_segment` frames from each key to the next (rotation by
-/// slerp, position and intrinsics linearly), then the last key.
+/// Smooth path through key cameras: `per_segment` frames from each key to the next (the key
+/// itself, then rotation by slerp, position and intrinsics linearly), then the last key.
 pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
     let mut out = Vec::new();
     for pair in keys.windows(2) {
         let (a, b) = (&pair[0], &pair[1]);
         let (qa, qb) = (quat_from_mat3(&a.rotation()), quat_from_mat3(&b.rotation()));
-        for k in 0..per_segment.max(1) {
+        out.push(a.clone());
+        for k in 1..per_segment.max(1) {
             let t = k as f32 / per_segment.max(1) as f32;
             let r = mat3_from_quat(slerp(qa, qb, t));
             let p = lerp(a.origin(), b.origin(), t);

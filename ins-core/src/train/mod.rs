@@ -7,6 +7,7 @@ pub mod metrics;
 pub mod plot;
 pub mod progress;
 pub mod schedule;
+pub mod seeding;
 pub mod trainer;
 
 pub use trainer::{LossTerms, Phase, Task, TrainOptions, TrainOutcome, Trainer};
