@@ -54,6 +54,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 fn main() {
     let cli = Cli::parse();
+    // Probing for a GPU loads Vulkan drivers whose window-system part complains on stderr when
+    // a headless machine has no XDG_RUNTIME_DIR; give it a harmless one. Done first, while the
+    // program is still single-threaded.
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        // SAFETY: no other thread exists yet.
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
+    }
     // Errors are reported as one message naming the problem; an internal panic is reported
     // the same way rather than as a backtrace.
     std::panic::set_hook(Box::new(|info| {

@@ -69,7 +69,7 @@ fn quiet(dir: &std::path::Path) -> TrainOptions {
 fn training_lowers_the_loss() {
     let device = Device::flex().autodiff();
     let dir = tempfile::tempdir().unwrap();
-    let t = Trainer::new(vec![Phase::new("fit", 200, 1e-2)], quiet(dir.path()));
+    let t = Trainer::new(vec![Phase::new("fit", 600, 2e-2)], quiet(dir.path()));
     let out = t
         .run(&mut ToyTask { nan_from: usize::MAX, global: 0 }, toy(&device))
         .unwrap();

@@ -20,11 +20,11 @@ pub struct LossWeights {
 pub const CAFFE_OVER_TORCH: f64 = 255.0 * 0.226;
 
 impl LossWeights {
-    /// Defaults for `preprocess`, equivalent to content 1 / style 10 under Caffe preprocessing.
+    /// Defaults for `preprocess`, equivalent to content 1 / style 2 under Caffe preprocessing.
     pub fn default_for(preprocess: Preprocess) -> Self {
         let caffe = Self {
             content: 1.0,
-            style: 10.0,
+            style: 2.0,
         };
         match preprocess {
             Preprocess::Caffe => caffe,
