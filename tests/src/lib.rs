@@ -47,3 +47,18 @@ pub fn real_vgg(device: &Device) -> vgg_import::Vgg {
     };
     vgg_import::load_vgg(&src, device).unwrap_or_else(|e| panic!("loading the real VGG-16: {e}"))
 }
+
+/// Saves `img` as `dir/name` and returns the path.
+pub fn save_image(dir: &Path, name: &str, img: &ins_core::imaging::RgbImage) -> PathBuf {
+    let p = dir.join(name);
+    img.save(&p).unwrap_or_else(|e| panic!("{e:#}"));
+    p
+}
+
+/// Trainer options for tests: no progress bar, a checkpoint every 50 steps.
+pub fn quiet_options(dir: &Path) -> ins_core::train::TrainOptions {
+    let mut o = ins_core::train::TrainOptions::new(dir);
+    o.quiet = true;
+    o.checkpoint_every = 50;
+    o
+}

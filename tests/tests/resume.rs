@@ -2,27 +2,12 @@
 //! when other tests share the thread pool the summation order (so the last bits of every sum)
 //! varies, which Adam then amplifies. Alone, a resumed run must match an uninterrupted one.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use burn::prelude::*;
-use ins_core::imaging::RgbImage;
-use ins_core::train::TrainOptions;
 use ins_models::demo::{demo_content, demo_style};
 use ins_models::siren::{SirenRun, SirenRunConfig, train};
-use ins_tests::real_vgg;
-
-fn write(dir: &Path, name: &str, img: &RgbImage) -> PathBuf {
-    let p = dir.join(name);
-    img.save(&p).unwrap();
-    p
-}
-
-fn opts(dir: &Path) -> TrainOptions {
-    let mut o = TrainOptions::new(dir);
-    o.quiet = true;
-    o.checkpoint_every = 50;
-    o
-}
+use ins_tests::{quiet_options, real_vgg, save_image};
 
 fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> SirenRunConfig {
     SirenRunConfig {
@@ -43,8 +28,8 @@ fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
     let device = Device::flex();
     let vgg = real_vgg(&device);
     let dir = tempfile::tempdir().unwrap();
-    let content = write(dir.path(), "c.png", &demo_content(24));
-    let style = write(dir.path(), "s.png", &demo_style(32));
+    let content = save_image(dir.path(), "c.png", &demo_content(24));
+    let style = save_image(dir.path(), "s.png", &demo_style(32));
     let mut cfg = small_config(content, vec![style], 24);
     cfg.hidden = 64;
     cfg.fit_steps = 20;
@@ -53,7 +38,7 @@ fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
 
     // Uninterrupted.
     let a_dir = dir.path().join("a");
-    let a = train(&cfg, vgg.clone(), &device, opts(&a_dir)).unwrap();
+    let a = train(&cfg, vgg.clone(), &device, quiet_options(&a_dir)).unwrap();
     assert!(a.finished);
     let a_img = ins_models::image_task::render_image(&a.model.valid(), 24, 24, &[1.0], &device).unwrap();
     let reloaded = SirenRun::load(&a_dir, &device).unwrap();
@@ -62,7 +47,7 @@ fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
 
     // Interrupted after 15 steps (inside fitting, past a checkpoint), then resumed.
     let b_dir = dir.path().join("b");
-    let mut o = opts(&b_dir);
+    let mut o = quiet_options(&b_dir);
     o.checkpoint_every = 5;
     o.stop_after = Some(15);
     let b1 = train(&cfg, vgg.clone(), &device, o.clone()).unwrap();
@@ -93,6 +78,6 @@ fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
     assert_eq!(steps, sorted, "duplicated or unordered steps in metrics.jsonl");
 
     // A run folder is not silently overwritten.
-    let again = train(&cfg, vgg, &device, opts(&a_dir));
+    let again = train(&cfg, vgg, &device, quiet_options(&a_dir));
     assert!(again.is_err());
 }

@@ -1,15 +1,14 @@
 //! SIREN + INS end to end: fitting, stylization, multi-style conditioning and interpolation,
 //! checkpoints and resume. Small images and few steps; the real VGG-16 supervises.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{StyleTarget, content_loss, style_loss};
-use ins_core::train::TrainOptions;
 use ins_models::demo::{demo_content, demo_style};
 use ins_models::siren::{SirenRun, SirenRunConfig, train};
-use ins_tests::real_vgg;
+use ins_tests::{quiet_options, real_vgg, save_image};
 use vgg_import::Vgg;
 
 /// Red and white diagonal stripes: a style nothing like the demo painting.
@@ -26,12 +25,6 @@ fn stripes(size: usize) -> RgbImage {
         height: size,
         data,
     }
-}
-
-fn write(dir: &Path, name: &str, img: &RgbImage) -> PathBuf {
-    let p = dir.join(name);
-    img.save(&p).unwrap();
-    p
 }
 
 fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> SirenRunConfig {
@@ -54,13 +47,6 @@ fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> SirenRun
     }
 }
 
-fn opts(dir: &Path) -> TrainOptions {
-    let mut o = TrainOptions::new(dir);
-    o.quiet = true;
-    o.checkpoint_every = 50;
-    o
-}
-
 /// Style distance of an image to a style image (the loss the trainer minimises).
 fn style_distance(vgg: &Vgg, img: &RgbImage, style: &RgbImage, device: &Device) -> f32 {
     let t = StyleTarget::from_image(vgg, style.to_tensor(device)).grams;
@@ -76,12 +62,12 @@ fn content_distance(vgg: &Vgg, img: &RgbImage, content: &RgbImage, device: &Devi
 fn siren_fits_an_image() {
     let device = Device::flex();
     let dir = tempfile::tempdir().unwrap();
-    let content = write(dir.path(), "c.png", &demo_content(32));
-    let style = write(dir.path(), "s.png", &demo_style(32));
+    let content = save_image(dir.path(), "c.png", &demo_content(32));
+    let style = save_image(dir.path(), "s.png", &demo_style(32));
     let mut cfg = small_config(content, vec![style], 32);
     cfg.fit_steps = 300;
     cfg.stylize_steps = 0;
-    let out = train(&cfg, real_vgg(&device), &device, opts(&dir.path().join("run"))).unwrap();
+    let out = train(&cfg, real_vgg(&device), &device, quiet_options(&dir.path().join("run"))).unwrap();
     let psnr = out.last["psnr"];
     assert!(psnr > 30.0, "PSNR after fitting: {psnr:.2} dB");
     assert!(dir.path().join("run/loss_curve.png").exists());
@@ -96,11 +82,11 @@ fn stylization_moves_towards_the_style_and_keeps_the_content() {
     let dir = tempfile::tempdir().unwrap();
     let content_img = demo_content(48);
     let style_img = demo_style(64);
-    let content = write(dir.path(), "c.png", &content_img);
-    let style = write(dir.path(), "s.png", &style_img);
+    let content = save_image(dir.path(), "c.png", &content_img);
+    let style = save_image(dir.path(), "s.png", &style_img);
     let cfg = small_config(content, vec![style], 48);
     let run_dir = dir.path().join("run");
-    train(&cfg, vgg.clone(), &device, opts(&run_dir)).unwrap();
+    train(&cfg, vgg.clone(), &device, quiet_options(&run_dir)).unwrap();
     let result = RgbImage::load(&run_dir.join("stylized.png")).unwrap();
     let before = style_distance(&vgg, &content_img, &style_img, &device);
     let after = style_distance(&vgg, &result, &style_img, &device);
@@ -118,13 +104,13 @@ fn two_styles_condition_the_render_and_interpolate_monotonically() {
     let dir = tempfile::tempdir().unwrap();
     let s1 = demo_style(64);
     let s2 = stripes(64);
-    let content = write(dir.path(), "c.png", &demo_content(48));
-    let p1 = write(dir.path(), "s1.png", &s1);
-    let p2 = write(dir.path(), "s2.png", &s2);
+    let content = save_image(dir.path(), "c.png", &demo_content(48));
+    let p1 = save_image(dir.path(), "s1.png", &s1);
+    let p2 = save_image(dir.path(), "s2.png", &s2);
     let mut cfg = small_config(content, vec![p1, p2], 48);
     cfg.stylize_steps = 150;
     let run_dir = dir.path().join("run");
-    train(&cfg, vgg.clone(), &device, opts(&run_dir)).unwrap();
+    train(&cfg, vgg.clone(), &device, quiet_options(&run_dir)).unwrap();
     let run = SirenRun::load(&run_dir, &device).unwrap();
     let r10 = run.render(48, 48, &[1.0, 0.0], &device).unwrap();
     let r01 = run.render(48, 48, &[0.0, 1.0], &device).unwrap();
