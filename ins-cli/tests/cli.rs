@@ -115,3 +115,30 @@ fn render_of_a_missing_run_is_a_clear_error() {
     let o = cli(&["render", "siren", "--run", "/no/such/run", "--out", "/tmp/x.png"]);
     assert_clean_failure(&o, "/no/such/run");
 }
+
+#[test]
+fn two_styles_train_and_render_a_mix_and_a_strip() {
+    let dir = tempfile::tempdir().unwrap();
+    let s1 = dir.path().join("s1.png");
+    let s2 = dir.path().join("s2.png");
+    image::RgbImage::from_fn(32, 32, |x, _| image::Rgb([if x % 8 < 4 { 250 } else { 20 }, 30, 30])).save(&s1).unwrap();
+    image::RgbImage::from_fn(32, 32, |_, y| image::Rgb([30, 30, if y % 6 < 3 { 250 } else { 20 }])).save(&s2).unwrap();
+    let run = dir.path().join("run");
+    let r = run.to_str().unwrap();
+    let o = cli(&[
+        "train", "siren", "--style", s1.to_str().unwrap(), "--style", s2.to_str().unwrap(), "--out", r, "--size", "24",
+        "--steps", "10", "--quiet", "--backend", "flex",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(run.join("stylized_0.png").exists() && run.join("stylized_1.png").exists());
+    let strip = dir.path().join("strip.png");
+    let o = cli(&["render", "siren", "--run", r, "--strip", "4", "--size", "20x20", "--out", strip.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&strip).unwrap();
+    assert_eq!((img.width(), img.height()), (80, 20), "four 20×20 renders side by side");
+    let mix = dir.path().join("mix.png");
+    let o = cli(&["render", "siren", "--run", r, "--mix", "0.3,0.7", "--out", mix.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = cli(&["render", "siren", "--run", r, "--mix=-1,2", "--out", mix.to_str().unwrap()]);
+    assert_clean_failure(&o, "non-negative");
+}
