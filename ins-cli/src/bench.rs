@@ -12,7 +12,7 @@ use ins_core::modules::cim::SirenCimConfig;
 use ins_core::modules::ins::Ins;
 use ins_core::modules::sim::SimConfig;
 use ins_core::train::groups::{OptimGroups, Optimizable};
-use ins_models::image_task::grid_coords;
+use ins_core::data::plain_image::pixel_coordinates;
 use vgg_import::Vgg16Features;
 
 #[derive(Args, Debug)]
@@ -113,7 +113,7 @@ fn bench_siren(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let cim = SirenCimConfig::new().init(device);
     let sim = SimConfig::new(2).with_d_hidden(64).with_depth(2);
     let mut model = Some(Ins::new(cim, &sim, false, device));
-    let coords = Tensor::<2>::from_data(TensorData::new(grid_coords(side, side), [side * side, 2]), device);
+    let coords = Tensor::<2>::from_data(TensorData::new(pixel_coordinates(side as u32, side as u32).into_flattened(), [side * side, 2]), device);
     let code = Tensor::<2>::from_floats([[1.0, 0.0]], device);
     let mut groups = OptimGroups::new(<Ins<ins_core::modules::cim::SirenCim> as Optimizable>::group_names());
     timed(steps, || {

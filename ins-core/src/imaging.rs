@@ -17,28 +17,15 @@ pub struct RgbImage {
 }
 
 impl RgbImage {
-    /// Reads a PNG or JPEG (any colour type; alpha is dropped) and names the file on error.
+    /// Reads a PNG or JPEG through [`crate::data::plain_image::load_rgb`] (alpha composited on
+    /// white); errors name the file.
     pub fn load(path: &Path) -> Result<Self> {
-        if !path.exists() {
-            bail!("image not found: {}", path.display());
-        }
-        let img = image::ImageReader::open(path)
-            .with_context(|| format!("opening {}", path.display()))?
-            .with_guessed_format()
-            .with_context(|| format!("reading {}", path.display()))?
-            .decode()
-            .map_err(|e| anyhow::anyhow!("{} is not a readable image: {e}", path.display()))?;
-        Ok(Self::from_dynamic(&img))
-    }
-
-    /// From a decoded image.
-    pub fn from_dynamic(img: &image::DynamicImage) -> Self {
-        let rgb = img.to_rgb32f();
-        Self {
-            width: rgb.width() as usize,
-            height: rgb.height() as usize,
-            data: rgb.into_raw(),
-        }
+        let img = crate::data::plain_image::load_rgb(path, None)?;
+        Ok(Self {
+            width: img.width as usize,
+            height: img.height as usize,
+            data: img.to_f32(),
+        })
     }
 
     /// Resized (Lanczos) to `width`×`height`.

@@ -10,6 +10,7 @@ use std::collections::HashMap;
 
 use anyhow::Result;
 use burn::prelude::*;
+use ins_core::data::plain_image::pixel_coordinates;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{StyleTarget, content_loss, mse, psnr, style_loss};
 use ins_core::modules::cim::ContentModule;
@@ -23,18 +24,6 @@ use vgg_import::Vgg;
 pub const FIT: &str = "fit";
 /// Name of the stylization phase.
 pub const STYLIZE: &str = "stylize";
-
-/// Pixel-centre coordinates of a `w`×`h` grid in [−1, 1]², row-major, as `[h·w, 2]` (x, y).
-pub fn grid_coords(w: usize, h: usize) -> Vec<f32> {
-    let mut out = Vec::with_capacity(w * h * 2);
-    for v in 0..h {
-        for u in 0..w {
-            out.push((u as f32 + 0.5) / w as f32 * 2.0 - 1.0);
-            out.push((v as f32 + 0.5) / h as f32 * 2.0 - 1.0);
-        }
-    }
-    out
-}
 
 /// One-hot codes of `n` styles, `[n, n]`.
 pub fn one_hot_codes(n: usize, device: &Device) -> Tensor<2> {
@@ -53,7 +42,7 @@ pub fn render_image<C: ContentModule>(
     code: &[f32],
     device: &Device,
 ) -> Result<RgbImage> {
-    let coords = grid_coords(w, h);
+    let coords = pixel_coordinates(w as u32, h as u32).into_flattened();
     let code = Tensor::<2>::from_data(TensorData::new(code.to_vec(), [1, code.len()]), device);
     let chunk = 32768;
     let mut data = Vec::with_capacity(w * h * 3);
@@ -129,7 +118,7 @@ impl ImageTask {
         .reshape([content.width * content.height, 3]);
         Self {
             device: device.clone(),
-            coords: grid_coords(content.width, content.height),
+            coords: pixel_coordinates(content.width as u32, content.height as u32).into_flattened(),
             content,
             content_tensor,
             vgg,

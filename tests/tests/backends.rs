@@ -8,7 +8,7 @@ use ins_core::modules::cim::SirenCim;
 use ins_core::modules::ins::Ins;
 use ins_core::train::checkpoint::{load_module_bytes, module_bytes};
 use ins_core::train::groups::{OptimGroups, Optimizable};
-use ins_models::image_task::grid_coords;
+use ins_core::data::plain_image::pixel_coordinates;
 use ins_models::siren::SirenRunConfig;
 use ins_tests::{fixture, values};
 use vgg_import::onnx::read_vgg_like_onnx;
@@ -38,7 +38,7 @@ fn one_step(backend: BackendChoice, init: &[u8]) -> (f32, Vec<f32>) {
         net: Vgg16Features::from_weights(&w, &device),
         preprocess: w.detected,
     };
-    let coords = Tensor::<2>::from_data(TensorData::new(grid_coords(SIDE, SIDE), [SIDE * SIDE, 2]), &device);
+    let coords = Tensor::<2>::from_data(TensorData::new(pixel_coordinates(SIDE as u32, SIDE as u32).into_flattened(), [SIDE * SIDE, 2]), &device);
     let target: Vec<f32> = (0..SIDE * SIDE * 3).map(|i| ((i * 7 % 13) as f32) / 12.0).collect();
     let target = Tensor::<1>::from_data(TensorData::new(target, [SIDE * SIDE * 3]), &device).reshape([1, SIDE * SIDE, 3]);
     let style_img = target.clone().reshape([1, SIDE, SIDE, 3]).permute([0, 3, 1, 2]);
