@@ -62,3 +62,25 @@ pub fn quiet_options(dir: &Path) -> ins_core::train::TrainOptions {
     o.checkpoint_every = 50;
     o
 }
+
+/// A small, fast SIREN+INS configuration for tests (training size `size`, one patch covering
+/// the image, full-image fitting batches).
+pub fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> ins_models::siren::SirenRunConfig {
+    ins_models::siren::SirenRunConfig {
+        content,
+        styles,
+        size,
+        style_size: 64,
+        fit_steps: 200,
+        stylize_steps: 100,
+        lr_fit: 1e-4,
+        lr_stylize: 2e-4,
+        fit_batch: size * size,
+        patch: size,
+        stride: 1,
+        hidden: 128,
+        depth: 3,
+        checkpoint_every: 50,
+        ..Default::default()
+    }
+}

@@ -2,26 +2,10 @@
 //! when other tests share the thread pool the summation order (so the last bits of every sum)
 //! varies, which Adam then amplifies. Alone, a resumed run must match an uninterrupted one.
 
-use std::path::PathBuf;
-
 use burn::prelude::*;
 use ins_models::demo::{demo_content, demo_style};
-use ins_models::siren::{SirenRun, SirenRunConfig, train};
-use ins_tests::{quiet_options, real_vgg, save_image};
-
-fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> SirenRunConfig {
-    SirenRunConfig {
-        content,
-        styles,
-        size,
-        style_size: 64,
-        fit_batch: size * size,
-        patch: size,
-        stride: 1,
-        lr_stylize: 2e-4,
-        ..Default::default()
-    }
-}
+use ins_models::siren::{SirenRun, train};
+use ins_tests::{quiet_options, real_vgg, save_image, small_config};
 
 #[test]
 fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {

@@ -1,14 +1,12 @@
 //! SIREN + INS end to end: fitting, stylization, multi-style conditioning and interpolation,
 //! checkpoints and resume. Small images and few steps; the real VGG-16 supervises.
 
-use std::path::PathBuf;
-
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{StyleTarget, content_loss, style_loss};
 use ins_models::demo::{demo_content, demo_style};
-use ins_models::siren::{SirenRun, SirenRunConfig, train};
-use ins_tests::{quiet_options, real_vgg, save_image};
+use ins_models::siren::{SirenRun, train};
+use ins_tests::{quiet_options, real_vgg, save_image, small_config};
 use vgg_import::Vgg;
 
 /// Red and white diagonal stripes: a style nothing like the demo painting.
@@ -24,26 +22,6 @@ fn stripes(size: usize) -> RgbImage {
         width: size,
         height: size,
         data,
-    }
-}
-
-fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> SirenRunConfig {
-    SirenRunConfig {
-        content,
-        styles,
-        size,
-        style_size: 64,
-        fit_steps: 200,
-        stylize_steps: 100,
-        lr_fit: 1e-4,
-        lr_stylize: 2e-4,
-        fit_batch: size * size,
-        patch: size,
-        stride: 1,
-        hidden: 128,
-        depth: 3,
-        checkpoint_every: 50,
-        ..Default::default()
     }
 }
 
