@@ -165,8 +165,7 @@ impl ImageTask {
         let rgb = model.forward(coords, self.codes.clone().slice([0..1]));
         let [_, p, _] = rgb.dims();
         let loss = mse(rgb.reshape([p, 3]), target);
-        let value = loss.clone().into_scalar::<f32>() as f64;
-        Ok(LossTerms::default().term("mse", loss).metric("psnr", psnr(value)))
+        Ok(LossTerms::default().term("mse", loss).metric_of("psnr", "mse", psnr))
     }
 
     fn stylize_losses<C: ContentModule>(&mut self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {

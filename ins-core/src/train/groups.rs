@@ -75,8 +75,11 @@ impl OptimGroups {
     /// Steps `module` with the gradients it has in `grads`, unless its group is frozen.
     pub fn step<M: Module>(&mut self, name: &str, module: M, grads: &mut Gradients, lr: f64) -> M {
         let setting = self.settings.get(name).copied().unwrap_or_default();
+        if setting.frozen {
+            return module;
+        }
         let params = GradientsParams::from_module(grads, &module);
-        if setting.frozen || params.is_empty() {
+        if params.is_empty() {
             return module;
         }
         match self.optimizers.get_mut(name) {

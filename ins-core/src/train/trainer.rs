@@ -77,8 +77,11 @@ impl Phase {
 pub struct LossTerms {
     /// Named scalar (`[1]`) terms; the trainer weights and sums them.
     pub terms: Vec<(String, Tensor<1>)>,
-    /// Extra logged numbers (e.g. PSNR).
+    /// Extra logged numbers.
     pub metrics: Vec<(String, f64)>,
+    /// Logged numbers computed from a term's value once the trainer has read it (e.g. PSNR
+    /// from MSE), so the task does not read the term a second time.
+    pub derived: Vec<(String, String, fn(f64) -> f64)>,
 }
 
 impl LossTerms {
@@ -91,6 +94,12 @@ impl LossTerms {
     /// Adds a logged metric.
     pub fn metric(mut self, name: &str, value: f64) -> Self {
         self.metrics.push((name.to_string(), value));
+        self
+    }
+
+    /// Logs `f(value of term)` as `name`.
+    pub fn metric_of(mut self, name: &str, term: &str, f: fn(f64) -> f64) -> Self {
+        self.derived.push((name.to_string(), term.to_string(), f));
         self
     }
 }
@@ -270,12 +279,34 @@ impl Trainer {
             let ts = Instant::now();
             let terms = task.losses(&model, phase, in_phase, step_seed(state.seed, step))?;
             let mut total_loss: Option<Tensor<1>> = None;
+            for (name, t) in &terms.terms {
+                let w = phase.weights.get(name).copied().unwrap_or(1.0);
+                if w != 0.0 {
+                    let weighted = t.clone().mul_scalar(w);
+                    total_loss = Some(match total_loss {
+                        Some(acc) => acc + weighted,
+                        None => weighted,
+                    });
+                }
+            }
+            // Every term and the total come back to the host in one read: one sync per step.
+            let read: Vec<Tensor<1>> = terms
+                .terms
+                .iter()
+                .map(|(_, t)| t.clone())
+                .chain(total_loss.clone())
+                .map(|t| t.detach())
+                .collect();
+            let values = Tensor::cat(read, 0)
+                .into_data()
+                .convert::<f32>()
+                .try_to_vec::<f32>()
+                .map_err(|e| anyhow::anyhow!("reading the loss values: {e:?}"))?;
             let mut record = serde_json::Map::new();
             record.insert("step".into(), step.into());
             record.insert("phase".into(), phase.name.clone().into());
-            for (name, t) in &terms.terms {
+            for ((name, _), &value) in terms.terms.iter().zip(&values) {
                 let w = phase.weights.get(name).copied().unwrap_or(1.0);
-                let value: f32 = t.clone().into_scalar::<f32>();
                 if !value.is_finite() {
                     let good = store
                         .latest_model_path()
@@ -290,12 +321,12 @@ impl Trainer {
                 }
                 last.insert(name.clone(), value as f64);
                 record.insert(name.clone(), (value as f64).into());
-                if w != 0.0 {
-                    let weighted = t.clone().mul_scalar(w);
-                    total_loss = Some(match total_loss {
-                        Some(acc) => acc + weighted,
-                        None => weighted,
-                    });
+            }
+            for (name, term, f) in &terms.derived {
+                if let Some(i) = terms.terms.iter().position(|(n, _)| n == term) {
+                    let v = f(values[i] as f64);
+                    last.insert(name.clone(), v);
+                    record.insert(name.clone(), v.into());
                 }
             }
             for (name, v) in &terms.metrics {
@@ -313,7 +344,7 @@ impl Trainer {
             let Some(total_loss) = total_loss else {
                 bail!("phase {} has no weighted loss term", phase.name);
             };
-            let total_value = total_loss.clone().into_scalar::<f32>();
+            let total_value = values[terms.terms.len()];
             if !total_value.is_finite() {
                 bail!(
                     "the weighted loss is {total_value} at step {step} (phase {}) although every term is finite: \
