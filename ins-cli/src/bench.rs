@@ -7,12 +7,12 @@ use burn::prelude::*;
 use burn::tensor::Distribution;
 use clap::Args;
 use ins_core::backend::BackendChoice;
+use ins_core::data::plain_image::pixel_coordinates;
 use ins_core::loss::{StyleTarget, content_loss, style_loss};
 use ins_core::modules::cim::SirenCimConfig;
 use ins_core::modules::ins::Ins;
 use ins_core::modules::sim::SimConfig;
 use ins_core::train::groups::{OptimGroups, Optimizable};
-use ins_core::data::plain_image::pixel_coordinates;
 use vgg_import::Vgg16Features;
 
 #[derive(Args, Debug)]
@@ -97,7 +97,9 @@ fn bench_vgg(device: &Device, steps: usize) -> Result<Vec<f64>> {
         let f = vgg.forward(x.clone());
         let loss = style_loss(&f, &targets).mul_scalar(STYLE_WEIGHT) + content_loss(&f, &content);
         let grads = loss.backward();
-        let g = x.grad(&grads).ok_or_else(|| anyhow::anyhow!("no gradient reached the input"))?;
+        let g = x
+            .grad(&grads)
+            .ok_or_else(|| anyhow::anyhow!("no gradient reached the input"))?;
         let _ = g.sum().into_scalar::<f32>();
         Ok(())
     })
@@ -106,16 +108,24 @@ fn bench_vgg(device: &Device, steps: usize) -> Result<Vec<f64>> {
 fn bench_siren(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let vgg = Vgg16Features::random(device);
     let side = 128;
-    let target_img = Tensor::<4>::random([1, 3, side, side], Distribution::Uniform(0.0, 1.0), device);
+    let target_img =
+        Tensor::<4>::random([1, 3, side, side], Distribution::Uniform(0.0, 1.0), device);
     let tf = vgg.forward(target_img);
     let targets = StyleTarget::from_features(&tf).grams;
     let content = tf.relu2_2.detach();
     let cim = SirenCimConfig::new().init(device);
     let sim = SimConfig::new(2).with_d_hidden(64).with_depth(2);
     let mut model = Some(Ins::new(cim, &sim, false, device));
-    let coords = Tensor::<2>::from_data(TensorData::new(pixel_coordinates(side as u32, side as u32).into_flattened(), [side * side, 2]), device);
+    let coords = Tensor::<2>::from_data(
+        TensorData::new(
+            pixel_coordinates(side as u32, side as u32).into_flattened(),
+            [side * side, 2],
+        ),
+        device,
+    );
     let code = Tensor::<2>::from_floats([[1.0, 0.0]], device);
-    let mut groups = OptimGroups::new(<Ins<ins_core::modules::cim::SirenCim> as Optimizable>::group_names());
+    let mut groups =
+        OptimGroups::new(<Ins<ins_core::modules::cim::SirenCim> as Optimizable>::group_names());
     timed(steps, || {
         let m = model.take().expect("model");
         let rgb = m.forward(coords.clone(), code.clone());

@@ -71,25 +71,64 @@ pub enum DataCommand {
 /// Runs a data command.
 pub fn run(cmd: DataCommand) -> Result<()> {
     match cmd {
-        DataCommand::Check { dir, json, sheet, no_sheet, downscale } => check(&dir, json, sheet, no_sheet, downscale),
-        DataCommand::Rays { dir, split, view, pixels, downscale } => rays(&dir, split, view, &pixels, downscale),
-        DataCommand::Synth { format, out, size, views } => {
+        DataCommand::Check {
+            dir,
+            json,
+            sheet,
+            no_sheet,
+            downscale,
+        } => check(&dir, json, sheet, no_sheet, downscale),
+        DataCommand::Rays {
+            dir,
+            split,
+            view,
+            pixels,
+            downscale,
+        } => rays(&dir, split, view, &pixels, downscale),
+        DataCommand::Synth {
+            format,
+            out,
+            size,
+            views,
+        } => {
             let s = synthetic::write(format, &out, &SynthOptions { size, views })?;
-            println!("wrote a {format} scene with {} views to {}", s.views.len(), out.display());
+            println!(
+                "wrote a {format} scene with {} views to {}",
+                s.views.len(),
+                out.display()
+            );
             Ok(())
         }
     }
 }
 
 fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
-    let (u, v) = s.split_once(',').ok_or_else(|| format!("pixel {s:?} is not COLUMN,ROW"))?;
-    let p = |t: &str| t.trim().parse::<u32>().map_err(|_| format!("pixel {s:?}: {t:?} is not a non-negative integer"));
+    let (u, v) = s
+        .split_once(',')
+        .ok_or_else(|| format!("pixel {s:?} is not COLUMN,ROW"))?;
+    let p = |t: &str| {
+        t.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("pixel {s:?}: {t:?} is not a non-negative integer"))
+    };
     Ok((p(u)?, p(v)?))
 }
 
-fn check(dir: &Path, json: bool, sheet: Option<PathBuf>, no_sheet: bool, downscale: u32) -> Result<()> {
+fn check(
+    dir: &Path,
+    json: bool,
+    sheet: Option<PathBuf>,
+    no_sheet: bool,
+    downscale: u32,
+) -> Result<()> {
     let t = Instant::now();
-    let scene = Scene::load(dir, &LoadOptions { downscale, ..Default::default() })?;
+    let scene = Scene::load(
+        dir,
+        &LoadOptions {
+            downscale,
+            ..Default::default()
+        },
+    )?;
     let load_s = t.elapsed().as_secs_f64();
     let report = check_scene(&scene);
     let sheet_path = if no_sheet {
@@ -110,27 +149,60 @@ fn check(dir: &Path, json: bool, sheet: Option<PathBuf>, no_sheet: bool, downsca
     } else {
         let s = &report.summary;
         println!("scene    {} ({}) at {}", s.name, s.format, s.root);
-        println!("views    {}: train {}, val {}, test {}", s.views, s.train, s.val, s.test);
+        println!(
+            "views    {}: train {}, val {}, test {}",
+            s.views, s.train, s.val, s.test
+        );
         println!(
             "images   {}×{}, focal {:.2} × {:.2} (fx {:.2}–{:.2} over views), principal point ({:.2}, {:.2})",
-            s.width, s.height, s.focal[0], s.focal[1], s.focal_x_range[0], s.focal_x_range[1], s.principal_point[0], s.principal_point[1]
+            s.width,
+            s.height,
+            s.focal[0],
+            s.focal[1],
+            s.focal_x_range[0],
+            s.focal_x_range[1],
+            s.principal_point[0],
+            s.principal_point[1]
         );
-        let range = if s.per_ray_range { "per ray, clipped to the bounding volume" } else { "fixed" };
+        let range = if s.per_ray_range {
+            "per ray, clipped to the bounding volume"
+        } else {
+            "fixed"
+        };
         println!("depth    near {:.3}, far {:.3} ({range})", s.near, s.far);
         match s.bounds {
-            Bounds::Sphere { center, radius } => println!("bounds   sphere centre {center:?} radius {radius}"),
+            Bounds::Sphere { center, radius } => {
+                println!("bounds   sphere centre {center:?} radius {radius}")
+            }
             Bounds::Aabb { min, max } => println!("bounds   box {} – {}", fmt3(min), fmt3(max)),
         }
         match s.mean_mask_coverage {
-            Some(c) => println!("masks    {} views, mean foreground {:.1}%", s.masks, 100.0 * c),
+            Some(c) => println!(
+                "masks    {} views, mean foreground {:.1}%",
+                s.masks,
+                100.0 * c
+            ),
             None => println!("masks    none"),
         }
-        println!("cameras  {:.3}–{:.3} from the volume's centre; source→scene scale {:.4}", s.camera_distance[0], s.camera_distance[1], s.to_scene_scale);
+        println!(
+            "cameras  {:.3}–{:.3} from the volume's centre; source→scene scale {:.4}",
+            s.camera_distance[0], s.camera_distance[1], s.to_scene_scale
+        );
         println!("loaded   in {load_s:.2} s");
         println!("checks");
         for c in &report.checks {
-            let note = if c.note.is_empty() { String::new() } else { format!("  ({})", c.note) };
-            println!("  {:<4}  {}: {}/{}{note}", if c.ok { "ok" } else { "FAIL" }, c.name, c.passed, c.total);
+            let note = if c.note.is_empty() {
+                String::new()
+            } else {
+                format!("  ({})", c.note)
+            };
+            println!(
+                "  {:<4}  {}: {}/{}{note}",
+                if c.ok { "ok" } else { "FAIL" },
+                c.name,
+                c.passed,
+                c.total
+            );
         }
         if let Some(p) = &sheet_path {
             println!("contact sheet: {}", p.display());
@@ -138,7 +210,11 @@ fn check(dir: &Path, json: bool, sheet: Option<PathBuf>, no_sheet: bool, downsca
     }
     if !report.all_ok() {
         let failed = report.checks.iter().filter(|c| !c.ok).count();
-        bail!("{failed} of {} checks failed for {}", report.checks.len(), dir.display());
+        bail!(
+            "{failed} of {} checks failed for {}",
+            report.checks.len(),
+            dir.display()
+        );
     }
     Ok(())
 }
@@ -147,13 +223,27 @@ fn fmt3(v: [f32; 3]) -> String {
     format!("[{:.3}, {:.3}, {:.3}]", v[0], v[1], v[2])
 }
 
-fn rays(dir: &Path, split: Split, view: usize, pixels: &[(u32, u32)], downscale: u32) -> Result<()> {
-    let opts = LoadOptions { downscale, splits: Some(vec![split]), ..Default::default() };
+fn rays(
+    dir: &Path,
+    split: Split,
+    view: usize,
+    pixels: &[(u32, u32)],
+    downscale: u32,
+) -> Result<()> {
+    let opts = LoadOptions {
+        downscale,
+        splits: Some(vec![split]),
+        ..Default::default()
+    };
     let scene = Scene::load(dir, &opts)?;
     let views = scene.split(split);
-    let &index = views
-        .get(view)
-        .with_context(|| format!("split {split} of {} has {} views; view {view} does not exist", dir.display(), views.len()))?;
+    let &index = views.get(view).with_context(|| {
+        format!(
+            "split {split} of {} has {} views; view {view} does not exist",
+            dir.display(),
+            views.len()
+        )
+    })?;
     let rays = scene.pixel_rays(index, pixels)?;
     for (i, &(u, v)) in pixels.iter().enumerate() {
         let line = serde_json::json!({

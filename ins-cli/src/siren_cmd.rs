@@ -141,7 +141,9 @@ pub fn train(variant: TrainVariant) -> Result<()> {
     let device = backend.device();
     let vgg = load_vgg(&a.vgg.source(), &device)?;
     if a.style_weight.is_some() || a.content_weight.is_some() {
-        let d = cfg.weights.unwrap_or_else(|| LossWeights::default_for(vgg.preprocess));
+        let d = cfg
+            .weights
+            .unwrap_or_else(|| LossWeights::default_for(vgg.preprocess));
         cfg.weights = Some(LossWeights {
             content: a.content_weight.unwrap_or(d.content),
             style: a.style_weight.unwrap_or(d.style),
@@ -180,8 +182,12 @@ fn parse_size(s: &str) -> Result<(usize, usize)> {
     if parts.len() != 2 {
         bail!("--size {s:?}: expected WxH, e.g. 512x512");
     }
-    let w: usize = parts[0].parse().map_err(|_| anyhow::anyhow!("--size {s:?}: bad width"))?;
-    let h: usize = parts[1].parse().map_err(|_| anyhow::anyhow!("--size {s:?}: bad height"))?;
+    let w: usize = parts[0]
+        .parse()
+        .map_err(|_| anyhow::anyhow!("--size {s:?}: bad width"))?;
+    let h: usize = parts[1]
+        .parse()
+        .map_err(|_| anyhow::anyhow!("--size {s:?}: bad height"))?;
     if w == 0 || h == 0 || w > 16384 || h > 16384 {
         bail!("--size {s:?}: each side must be between 1 and 16384");
     }

@@ -76,7 +76,11 @@ pub fn run(cmd: VggCommand) -> Result<()> {
             let src = vgg.source();
             let path = resolve_onnx(&src)?;
             let w = vgg_import::onnx::read_vgg_onnx(&path)?;
-            let params: usize = w.convs.iter().map(|(a, b)| a.num_elements() + b.num_elements()).sum();
+            let params: usize = w
+                .convs
+                .iter()
+                .map(|(a, b)| a.num_elements() + b.num_elements())
+                .sum();
             println!(
                 "{}",
                 serde_json::json!({
@@ -112,14 +116,18 @@ pub fn run(cmd: VggCommand) -> Result<()> {
 }
 
 /// Writes a tensor as a little-endian f32 .npy file (C order).
-pub fn write_npy<const D: usize>(path: &std::path::Path, t: burn::prelude::Tensor<D>) -> Result<()> {
+pub fn write_npy<const D: usize>(
+    path: &std::path::Path,
+    t: burn::prelude::Tensor<D>,
+) -> Result<()> {
     let shape: Vec<u64> = t.dims().iter().map(|&d| d as u64).collect();
     let data = t
         .into_data()
         .convert::<f32>()
         .try_to_vec::<f32>()
         .map_err(|e| anyhow::anyhow!("reading tensor: {e:?}"))?;
-    let file = std::fs::File::create(path).with_context(|| format!("writing {}", path.display()))?;
+    let file =
+        std::fs::File::create(path).with_context(|| format!("writing {}", path.display()))?;
     use npyz::WriterBuilder;
     let mut w = npyz::WriteOptions::<f32>::new()
         .default_dtype()
@@ -129,6 +137,7 @@ pub fn write_npy<const D: usize>(path: &std::path::Path, t: burn::prelude::Tenso
         .with_context(|| format!("writing {}", path.display()))?;
     w.extend(data.iter().copied())
         .with_context(|| format!("writing {}", path.display()))?;
-    w.finish().with_context(|| format!("writing {}", path.display()))?;
+    w.finish()
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

@@ -18,13 +18,23 @@ fn stderr(o: &Output) -> String {
 
 fn assert_clean_failure(o: &Output, needle: &str) {
     let e = stderr(o);
-    assert_eq!(o.status.code(), Some(1), "exit status {:?}, stderr: {e}", o.status);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "exit status {:?}, stderr: {e}",
+        o.status
+    );
     assert!(e.contains(needle), "stderr does not name {needle:?}: {e}");
-    assert!(!e.contains("panicked") && !e.contains("RUST_BACKTRACE"), "panic output: {e}");
+    assert!(
+        !e.contains("panicked") && !e.contains("RUST_BACKTRACE"),
+        "panic output: {e}"
+    );
 }
 
 fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/fixtures")
+        .join(rel)
 }
 
 #[test]
@@ -32,30 +42,77 @@ fn quick_run_on_the_builtin_input_then_render_any_size_and_mix() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let r = run.to_str().unwrap();
-    let o = cli(&["train", "siren", "--out", r, "--size", "32", "--steps", "20", "--quiet", "--backend", "flex"]);
+    let o = cli(&[
+        "train",
+        "siren",
+        "--out",
+        r,
+        "--size",
+        "32",
+        "--steps",
+        "20",
+        "--quiet",
+        "--backend",
+        "flex",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary["steps"], 20);
-    for f in ["stylized.png", "preview.png", "loss_curve.png", "metrics.jsonl", "config.json", "inputs/demo_content.png", "inputs/demo_style.png"] {
+    for f in [
+        "stylized.png",
+        "preview.png",
+        "loss_curve.png",
+        "metrics.jsonl",
+        "config.json",
+        "inputs/demo_content.png",
+        "inputs/demo_style.png",
+    ] {
         assert!(run.join(f).exists(), "missing {f}");
     }
     let out = dir.path().join("big.png");
-    let o = cli(&["render", "siren", "--run", r, "--size", "96x64", "--out", out.to_str().unwrap()]);
+    let o = cli(&[
+        "render",
+        "siren",
+        "--run",
+        r,
+        "--size",
+        "96x64",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let img = image::open(&out).unwrap();
     assert_eq!((img.width(), img.height()), (96, 64));
     // One style: a mix of two weights is refused with a reason.
-    let o = cli(&["render", "siren", "--run", r, "--mix", "1,1", "--out", out.to_str().unwrap()]);
+    let o = cli(&[
+        "render",
+        "siren",
+        "--run",
+        r,
+        "--mix",
+        "1,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_clean_failure(&o, "2 weights");
     // Continuing a finished run is refused unless --resume.
-    let o = cli(&["train", "siren", "--out", r, "--size", "32", "--steps", "20", "--quiet"]);
+    let o = cli(&[
+        "train", "siren", "--out", r, "--size", "32", "--steps", "20", "--quiet",
+    ]);
     assert_clean_failure(&o, "--resume");
 }
 
 #[test]
 fn missing_content_names_the_file() {
     let dir = tempfile::tempdir().unwrap();
-    let o = cli(&["train", "siren", "--content", "/no/such/photo.jpg", "--out", dir.path().to_str().unwrap()]);
+    let o = cli(&[
+        "train",
+        "siren",
+        "--content",
+        "/no/such/photo.jpg",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
     assert_clean_failure(&o, "/no/such/photo.jpg");
 }
 
@@ -64,7 +121,16 @@ fn corrupt_style_image_names_the_file() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("painting.png");
     std::fs::write(&bad, b"\x89PNG\r\n\x1a\n but then nothing sensible").unwrap();
-    let o = cli(&["train", "siren", "--style", bad.to_str().unwrap(), "--out", dir.path().join("r").to_str().unwrap(), "--steps", "2"]);
+    let o = cli(&[
+        "train",
+        "siren",
+        "--style",
+        bad.to_str().unwrap(),
+        "--out",
+        dir.path().join("r").to_str().unwrap(),
+        "--steps",
+        "2",
+    ]);
     assert_clean_failure(&o, "painting.png");
 }
 
@@ -72,9 +138,22 @@ fn corrupt_style_image_names_the_file() {
 fn wrong_onnx_model_names_the_file_and_the_problem() {
     let dir = tempfile::tempdir().unwrap();
     let onnx = fixture("vgg/too_few.onnx");
-    let o = cli(&["train", "siren", "--onnx", onnx.to_str().unwrap(), "--out", dir.path().to_str().unwrap(), "--steps", "2"]);
+    let o = cli(&[
+        "train",
+        "siren",
+        "--onnx",
+        onnx.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--steps",
+        "2",
+    ]);
     assert_clean_failure(&o, "too_few.onnx");
-    assert!(stderr(&o).contains("expected [64, 3, 3, 3]"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("expected [64, 3, 3, 3]"),
+        "{}",
+        stderr(&o)
+    );
     let garbage = dir.path().join("weights.onnx");
     std::fs::write(&garbage, vec![0xffu8; 1000]).unwrap();
     let o = cli(&["vgg", "info", "--onnx", garbage.to_str().unwrap()]);
@@ -86,8 +165,19 @@ fn overflowing_loss_weight_stops_with_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let o = cli(&[
-        "train", "siren", "--out", run.to_str().unwrap(), "--size", "24", "--fit-steps", "2", "--stylize-steps", "4",
-        "--style-weight", "1e40", "--quiet",
+        "train",
+        "siren",
+        "--out",
+        run.to_str().unwrap(),
+        "--size",
+        "24",
+        "--fit-steps",
+        "2",
+        "--stylize-steps",
+        "4",
+        "--style-weight",
+        "1e40",
+        "--quiet",
     ]);
     assert_clean_failure(&o, "too large");
 }
@@ -96,11 +186,29 @@ fn overflowing_loss_weight_stops_with_a_clear_message() {
 fn vgg_features_writes_the_four_layers() {
     let dir = tempfile::tempdir().unwrap();
     let img = dir.path().join("img.png");
-    image::RgbImage::from_fn(40, 24, |x, y| image::Rgb([(x * 6) as u8, (y * 10) as u8, 128])).save(&img).unwrap();
+    image::RgbImage::from_fn(40, 24, |x, y| {
+        image::Rgb([(x * 6) as u8, (y * 10) as u8, 128])
+    })
+    .save(&img)
+    .unwrap();
     let out = dir.path().join("feats");
-    let o = cli(&["vgg", "features", "--image", img.to_str().unwrap(), "--out", out.to_str().unwrap(), "--backend", "flex"]);
+    let o = cli(&[
+        "vgg",
+        "features",
+        "--image",
+        img.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--backend",
+        "flex",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let expect = [("relu1_2", [1, 64, 24, 40]), ("relu2_2", [1, 128, 12, 20]), ("relu3_3", [1, 256, 6, 10]), ("relu4_3", [1, 512, 3, 5])];
+    let expect = [
+        ("relu1_2", [1, 64, 24, 40]),
+        ("relu2_2", [1, 128, 12, 20]),
+        ("relu3_3", [1, 256, 6, 10]),
+        ("relu4_3", [1, 512, 3, 5]),
+    ];
     for (name, shape) in expect {
         let bytes = std::fs::read(out.join(format!("{name}.npy"))).unwrap();
         let header = String::from_utf8_lossy(&bytes[..128]).to_string();
@@ -112,7 +220,14 @@ fn vgg_features_writes_the_four_layers() {
 
 #[test]
 fn render_of_a_missing_run_is_a_clear_error() {
-    let o = cli(&["render", "siren", "--run", "/no/such/run", "--out", "/tmp/x.png"]);
+    let o = cli(&[
+        "render",
+        "siren",
+        "--run",
+        "/no/such/run",
+        "--out",
+        "/tmp/x.png",
+    ]);
     assert_clean_failure(&o, "/no/such/run");
 }
 
@@ -121,24 +236,77 @@ fn two_styles_train_and_render_a_mix_and_a_strip() {
     let dir = tempfile::tempdir().unwrap();
     let s1 = dir.path().join("s1.png");
     let s2 = dir.path().join("s2.png");
-    image::RgbImage::from_fn(32, 32, |x, _| image::Rgb([if x % 8 < 4 { 250 } else { 20 }, 30, 30])).save(&s1).unwrap();
-    image::RgbImage::from_fn(32, 32, |_, y| image::Rgb([30, 30, if y % 6 < 3 { 250 } else { 20 }])).save(&s2).unwrap();
+    image::RgbImage::from_fn(32, 32, |x, _| {
+        image::Rgb([if x % 8 < 4 { 250 } else { 20 }, 30, 30])
+    })
+    .save(&s1)
+    .unwrap();
+    image::RgbImage::from_fn(32, 32, |_, y| {
+        image::Rgb([30, 30, if y % 6 < 3 { 250 } else { 20 }])
+    })
+    .save(&s2)
+    .unwrap();
     let run = dir.path().join("run");
     let r = run.to_str().unwrap();
     let o = cli(&[
-        "train", "siren", "--style", s1.to_str().unwrap(), "--style", s2.to_str().unwrap(), "--out", r, "--size", "24",
-        "--steps", "10", "--quiet", "--backend", "flex",
+        "train",
+        "siren",
+        "--style",
+        s1.to_str().unwrap(),
+        "--style",
+        s2.to_str().unwrap(),
+        "--out",
+        r,
+        "--size",
+        "24",
+        "--steps",
+        "10",
+        "--quiet",
+        "--backend",
+        "flex",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(run.join("stylized_0.png").exists() && run.join("stylized_1.png").exists());
     let strip = dir.path().join("strip.png");
-    let o = cli(&["render", "siren", "--run", r, "--strip", "4", "--size", "20x20", "--out", strip.to_str().unwrap()]);
+    let o = cli(&[
+        "render",
+        "siren",
+        "--run",
+        r,
+        "--strip",
+        "4",
+        "--size",
+        "20x20",
+        "--out",
+        strip.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let img = image::open(&strip).unwrap();
-    assert_eq!((img.width(), img.height()), (80, 20), "four 20×20 renders side by side");
+    assert_eq!(
+        (img.width(), img.height()),
+        (80, 20),
+        "four 20×20 renders side by side"
+    );
     let mix = dir.path().join("mix.png");
-    let o = cli(&["render", "siren", "--run", r, "--mix", "0.3,0.7", "--out", mix.to_str().unwrap()]);
+    let o = cli(&[
+        "render",
+        "siren",
+        "--run",
+        r,
+        "--mix",
+        "0.3,0.7",
+        "--out",
+        mix.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let o = cli(&["render", "siren", "--run", r, "--mix=-1,2", "--out", mix.to_str().unwrap()]);
+    let o = cli(&[
+        "render",
+        "siren",
+        "--run",
+        r,
+        "--mix=-1,2",
+        "--out",
+        mix.to_str().unwrap(),
+    ]);
     assert_clean_failure(&o, "non-negative");
 }

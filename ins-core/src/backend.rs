@@ -27,7 +27,9 @@ impl std::str::FromStr for BackendChoice {
             "flex" | "cpu" => Ok(Self::Flex),
             "ndarray" => Ok(Self::Ndarray),
             "wgpu" | "gpu" => Ok(Self::Wgpu),
-            _ => Err(format!("unknown backend {s:?} (expected auto, flex, ndarray or wgpu)")),
+            _ => Err(format!(
+                "unknown backend {s:?} (expected auto, flex, ndarray or wgpu)"
+            )),
         }
     }
 }

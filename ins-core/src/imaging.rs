@@ -33,13 +33,23 @@ impl RgbImage {
         if width == self.width && height == self.height {
             return self.clone();
         }
-        let buf = image::Rgb32FImage::from_raw(self.width as u32, self.height as u32, self.data.clone())
-            .expect("buffer matches its size");
-        let out = image::imageops::resize(&buf, width as u32, height as u32, image::imageops::FilterType::Lanczos3);
+        let buf =
+            image::Rgb32FImage::from_raw(self.width as u32, self.height as u32, self.data.clone())
+                .expect("buffer matches its size");
+        let out = image::imageops::resize(
+            &buf,
+            width as u32,
+            height as u32,
+            image::imageops::FilterType::Lanczos3,
+        );
         Self {
             width,
             height,
-            data: out.into_raw().into_iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+            data: out
+                .into_raw()
+                .into_iter()
+                .map(|v| v.clamp(0.0, 1.0))
+                .collect(),
         }
     }
 
@@ -53,9 +63,12 @@ impl RgbImage {
 
     /// `[1, 3, H, W]` tensor.
     pub fn to_tensor(&self, device: &Device) -> Tensor<4> {
-        Tensor::<1>::from_data(TensorData::new(self.data.clone(), [self.data.len()]), device)
-            .reshape([1, self.height, self.width, 3])
-            .permute([0, 3, 1, 2])
+        Tensor::<1>::from_data(
+            TensorData::new(self.data.clone(), [self.data.len()]),
+            device,
+        )
+        .reshape([1, self.height, self.width, 3])
+        .permute([0, 3, 1, 2])
     }
 
     /// From an `[H, W, 3]` tensor.

@@ -40,13 +40,18 @@ impl ContentModule for GaussianFourierCim {
     }
 
     fn features(&self, coords: Tensor<2>) -> Tensor<2> {
-        let proj = coords.matmul(self.b.val()).mul_scalar(std::f32::consts::TAU);
-        self.mlp.forward(Tensor::cat(vec![proj.clone().sin(), proj.cos()], 1))
+        let proj = coords
+            .matmul(self.b.val())
+            .mul_scalar(std::f32::consts::TAU);
+        self.mlp
+            .forward(Tensor::cat(vec![proj.clone().sin(), proj.cos()], 1))
     }
 }
 
 fn main() -> Result<()> {
-    let out = std::env::args().nth(1).unwrap_or_else(|| "runs/custom_cim".into());
+    let out = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| "runs/custom_cim".into());
     let device = Device::flex();
     let ad = device.clone().autodiff();
     ad.seed(1);
@@ -60,8 +65,24 @@ fn main() -> Result<()> {
     let content = demo_content(96);
     let style = demo_style(128);
     let weights = ins_core::loss::LossWeights::default_for(vgg.preprocess);
-    let model = Ins::new(GaussianFourierCim::new(64, 6.0, &ad), &SimConfig::new(1), true, &ad);
-    let mut task = ImageTask::new(content.clone(), &[style], 128, vgg, 96 * 96, PatchSpec { size: 96, stride: 1 }, &ad);
+    let model = Ins::new(
+        GaussianFourierCim::new(64, 6.0, &ad),
+        &SimConfig::new(1),
+        true,
+        &ad,
+    );
+    let mut task = ImageTask::new(
+        content.clone(),
+        &[style],
+        128,
+        vgg,
+        96 * 96,
+        PatchSpec {
+            size: 96,
+            stride: 1,
+        },
+        &ad,
+    );
     let phases = vec![
         Phase::new(FIT, 300, 1e-3).weight("mse", 1.0),
         Phase::new(STYLIZE, 150, 1e-3)
@@ -70,10 +91,18 @@ fn main() -> Result<()> {
     ];
     let mut opts = TrainOptions::new(&out);
     opts.checkpoint_every = 0;
-    let outcome = Trainer::new(phases, opts).run(&mut ImageTaskFor::<GaussianFourierCim>::new(&mut task), model)?;
+    let outcome = Trainer::new(phases, opts).run(
+        &mut ImageTaskFor::<GaussianFourierCim>::new(&mut task),
+        model,
+    )?;
     let img = render_image(&outcome.model.valid(), 192, 192, &[1.0], &device)?;
     let path = std::path::Path::new(&out).join("stylized_192.png");
     img.save(&path)?;
-    println!("{} ({} steps in {:.1} s)", path.display(), outcome.steps, outcome.seconds);
+    println!(
+        "{} ({} steps in {:.1} s)",
+        path.display(),
+        outcome.steps,
+        outcome.seconds
+    );
     Ok(())
 }

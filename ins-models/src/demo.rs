@@ -4,7 +4,9 @@
 use ins_core::imaging::RgbImage;
 
 fn hash(x: i32, y: i32, seed: u32) -> f32 {
-    let mut h = (x as u32).wrapping_mul(374_761_393) ^ (y as u32).wrapping_mul(668_265_263) ^ seed.wrapping_mul(2_246_822_519);
+    let mut h = (x as u32).wrapping_mul(374_761_393)
+        ^ (y as u32).wrapping_mul(668_265_263)
+        ^ seed.wrapping_mul(2_246_822_519);
     h = (h ^ (h >> 13)).wrapping_mul(1_274_126_177);
     (h ^ (h >> 16)) as f32 / u32::MAX as f32
 }
@@ -32,7 +34,10 @@ fn fbm(x: f32, y: f32, seed: u32) -> f32 {
 pub fn demo_content(size: usize) -> RgbImage {
     let mut data = Vec::with_capacity(size * size * 3);
     let light = normalize([-0.5, 0.8, 0.6]);
-    let spheres = [([-0.45f32, 0.0, -3.2], 0.55f32, [0.85f32, 0.25, 0.2]), ([0.6, -0.15, -2.8], 0.4, [0.2, 0.45, 0.85])];
+    let spheres = [
+        ([-0.45f32, 0.0, -3.2], 0.55f32, [0.85f32, 0.25, 0.2]),
+        ([0.6, -0.15, -2.8], 0.4, [0.2, 0.45, 0.85]),
+    ];
     for v in 0..size {
         for u in 0..size {
             let x = (u as f32 + 0.5) / size as f32 * 2.0 - 1.0;
@@ -50,8 +55,13 @@ pub fn demo_content(size: usize) -> RgbImage {
                     best = t;
                     let px = d[0] * t;
                     let pz = d[2] * t;
-                    let check = ((px * 2.0).floor() as i32 + (pz * 2.0).floor() as i32).rem_euclid(2);
-                    let base = if check == 0 { [0.9, 0.88, 0.8] } else { [0.35, 0.3, 0.28] };
+                    let check =
+                        ((px * 2.0).floor() as i32 + (pz * 2.0).floor() as i32).rem_euclid(2);
+                    let base = if check == 0 {
+                        [0.9, 0.88, 0.8]
+                    } else {
+                        [0.35, 0.3, 0.28]
+                    };
                     let fade = (1.0 / (1.0 + 0.08 * t * t)).max(0.3);
                     col = base.map(|c| c * fade + 0.6 * (1.0 - fade));
                 }
@@ -86,7 +96,13 @@ pub fn demo_content(size: usize) -> RgbImage {
 /// A `size`×`size` style image: short brush strokes following a swirling flow, in a night-sky
 /// palette of blues and yellows.
 pub fn demo_style(size: usize) -> RgbImage {
-    let palette = [[0.05f32, 0.1, 0.3], [0.1, 0.25, 0.55], [0.3, 0.5, 0.8], [0.95, 0.85, 0.3], [0.85, 0.6, 0.15]];
+    let palette = [
+        [0.05f32, 0.1, 0.3],
+        [0.1, 0.25, 0.55],
+        [0.3, 0.5, 0.8],
+        [0.95, 0.85, 0.3],
+        [0.85, 0.6, 0.15],
+    ];
     let mut data = Vec::with_capacity(size * size * 3);
     for v in 0..size {
         for u in 0..size {

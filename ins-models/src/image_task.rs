@@ -157,7 +157,9 @@ impl ImageTask {
         let idx: Vec<usize> = if self.fit_batch >= n {
             (0..n).collect()
         } else {
-            (0..self.fit_batch).map(|_| rng.random_range(0..n)).collect()
+            (0..self.fit_batch)
+                .map(|_| rng.random_range(0..n))
+                .collect()
         };
         let (coords, target) = self.gather(&idx);
         // Every style row sees the same content: the AM starts as identity, and fitting under
@@ -165,7 +167,9 @@ impl ImageTask {
         let rgb = model.forward(coords, self.codes.clone().slice([0..1]));
         let [_, p, _] = rgb.dims();
         let loss = mse(rgb.reshape([p, 3]), target);
-        Ok(LossTerms::default().term("mse", loss).metric_of("psnr", "mse", psnr))
+        Ok(LossTerms::default()
+            .term("mse", loss)
+            .metric_of("psnr", "mse", psnr))
     }
 
     fn stylize_losses<C: ContentModule>(&mut self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
@@ -223,7 +227,13 @@ impl<'a, C> ImageTaskFor<'a, C> {
 impl<C: ContentModule> Task for ImageTaskFor<'_, C> {
     type Model = Ins<C>;
 
-    fn losses(&mut self, model: &Ins<C>, phase: &Phase, _step: usize, seed: u64) -> Result<LossTerms> {
+    fn losses(
+        &mut self,
+        model: &Ins<C>,
+        phase: &Phase,
+        _step: usize,
+        seed: u64,
+    ) -> Result<LossTerms> {
         if phase.name == FIT {
             self.task.fit_losses(model, seed)
         } else {

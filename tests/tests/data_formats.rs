@@ -17,7 +17,8 @@ use ins_core::render::rays::RaySampler;
 
 fn write(format: SceneFormat, size: u32, views: usize) -> (tempfile::TempDir, SynthScene) {
     let dir = tempfile::tempdir().expect("tempdir");
-    let synth = synthetic::write(format, dir.path(), &SynthOptions { size, views }).expect("write synthetic scene");
+    let synth = synthetic::write(format, dir.path(), &SynthOptions { size, views })
+        .expect("write synthetic scene");
     (dir, synth)
 }
 
@@ -31,7 +32,13 @@ fn dist(a: Vec3, b: Vec3) -> f32 {
 
 /// For interior foreground pixels of every view (every 3rd in each direction), the loaded ray
 /// at the rendered depth (× `scale`) must land on the rendered point mapped by `map`.
-fn assert_rays_hit_surface(scene: &Scene, synth: &SynthScene, map: impl Fn(Vec3) -> Vec3, scale: f32, tol: f32) {
+fn assert_rays_hit_surface(
+    scene: &Scene,
+    synth: &SynthScene,
+    map: impl Fn(Vec3) -> Vec3,
+    scale: f32,
+    tol: f32,
+) {
     assert_eq!(scene.views.len(), synth.views.len());
     let mut checked = 0;
     for (i, gt) in synth.views.iter().enumerate() {
@@ -48,10 +55,17 @@ fn assert_rays_hit_surface(scene: &Scene, synth: &SynthScene, map: impl Fn(Vec3)
         for (k, &(x, y)) in pixels.iter().enumerate() {
             let t_world = r.depth[(y * r.width + x) as usize];
             let (o, d) = gt.camera.pixel_ray(x, y);
-            let p_world = [o[0] + t_world * d[0], o[1] + t_world * d[1], o[2] + t_world * d[2]];
+            let p_world = [
+                o[0] + t_world * d[0],
+                o[1] + t_world * d[1],
+                o[2] + t_world * d[2],
+            ];
             let expected = map(p_world);
             let got = rays.point(k, t_world * scale);
-            assert!((norm(rays.directions[k]) - 1.0).abs() < 1e-5, "direction not unit");
+            assert!(
+                (norm(rays.directions[k]) - 1.0).abs() < 1e-5,
+                "direction not unit"
+            );
             assert!(
                 dist(got, expected) < tol,
                 "view {i} pixel ({x}, {y}): ray at depth {} gives {got:?}, surface is at {expected:?}",
@@ -60,7 +74,10 @@ fn assert_rays_hit_surface(scene: &Scene, synth: &SynthScene, map: impl Fn(Vec3)
             checked += 1;
         }
     }
-    assert!(checked >= 20 * synth.views.len().min(4), "too few interior pixels checked: {checked}");
+    assert!(
+        checked >= 20 * synth.views.len().min(4),
+        "too few interior pixels checked: {checked}"
+    );
 }
 
 #[test]
@@ -68,7 +85,10 @@ fn blender_rays_hit_rendered_surface() {
     let (dir, synth) = write(SceneFormat::Blender, 48, 4);
     let scene = load(dir.path());
     assert_eq!(scene.format, SceneFormat::Blender);
-    assert_eq!((scene.train.len(), scene.val.len(), scene.test.len()), (4, 1, 1));
+    assert_eq!(
+        (scene.train.len(), scene.val.len(), scene.test.len()),
+        (4, 1, 1)
+    );
     let f = 0.5 * 48.0 / (0.5f32 * 0.691_111_2).tan();
     assert!((scene.views[0].camera.fx - f).abs() < 1e-3);
     assert_eq!((scene.near, scene.far), (2.0, 6.0));
@@ -99,18 +119,30 @@ fn blender_alpha_is_composited_on_white_and_kept_as_mask() {
     }
     // A half-transparent red pixel composites to pink; its alpha stays the mask.
     let img = dir.path().join("train").join("r_0.png");
-    image::RgbaImage::from_pixel(32, 32, image::Rgba([255, 0, 0, 128])).save(&img).unwrap();
+    image::RgbaImage::from_pixel(32, 32, image::Rgba([255, 0, 0, 128]))
+        .save(&img)
+        .unwrap();
     let scene = load(dir.path());
     let v = &scene.views[0];
     let rgb = v.image.rgb(5, 5);
-    assert!((rgb[0] - 1.0).abs() < 1e-6 && (rgb[1] - 127.0 / 255.0).abs() < 1.5 / 255.0, "{rgb:?}");
+    assert!(
+        (rgb[0] - 1.0).abs() < 1e-6 && (rgb[1] - 127.0 / 255.0).abs() < 1.5 / 255.0,
+        "{rgb:?}"
+    );
     assert!((v.mask.as_ref().unwrap().value(5, 5) - 128.0 / 255.0).abs() < 1e-6);
 }
 
 #[test]
 fn blender_downscale_scales_intrinsics_and_keeps_rays() {
     let (dir, synth) = write(SceneFormat::Blender, 48, 2);
-    let scene = Scene::load(dir.path(), &LoadOptions { downscale: 2, ..Default::default() }).unwrap();
+    let scene = Scene::load(
+        dir.path(),
+        &LoadOptions {
+            downscale: 2,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let cam = &scene.views[0].camera;
     assert_eq!((cam.width, cam.height), (24, 24));
     assert!((cam.fx - synth.views[0].camera.fx / 2.0).abs() < 1e-4);
@@ -118,7 +150,9 @@ fn blender_downscale_scales_intrinsics_and_keeps_rays() {
     // full-size continuous position (2u + 1, 2v + 1).
     let rays = scene.pixel_rays(0, &[(3, 17), (20, 5)]).unwrap();
     for (k, (u, v)) in [(3u32, 17u32), (20, 5)].into_iter().enumerate() {
-        let (_, d) = synth.views[0].camera.ray(2.0 * u as f32 + 1.0, 2.0 * v as f32 + 1.0);
+        let (_, d) = synth.views[0]
+            .camera
+            .ray(2.0 * u as f32 + 1.0, 2.0 * v as f32 + 1.0);
         assert!(dist(rays.directions[k], d) < 1e-5);
     }
 }
@@ -129,9 +163,17 @@ fn llff_rays_hit_rendered_surface_after_rescale_and_recentre() {
     let scene = load(dir.path());
     assert_eq!(scene.format, SceneFormat::Llff);
     // Rescale so the nearest bound becomes 1/0.75, computed from the rendered depths.
-    let min_near = synth.views.iter().map(|v| v.depth_bounds.0).fold(f32::INFINITY, f32::min);
+    let min_near = synth
+        .views
+        .iter()
+        .map(|v| v.depth_bounds.0)
+        .fold(f32::INFINITY, f32::min);
     let sc = 1.0 / (0.75 * min_near);
-    assert!((scene.to_scene.scale - sc).abs() < 1e-4 * sc, "{} vs {sc}", scene.to_scene.scale);
+    assert!(
+        (scene.to_scene.scale - sc).abs() < 1e-4 * sc,
+        "{} vs {sc}",
+        scene.to_scene.scale
+    );
     assert!((scene.near - 0.9 / 0.75).abs() < 1e-4);
     assert!(orthonormality_error(&scene.to_scene.rotation) < 1e-5);
     // Recentred: the average pose is the identity.
@@ -148,7 +190,9 @@ fn llff_rays_hit_rendered_surface_after_rescale_and_recentre() {
     // Per-view bounds are the written ones, rescaled.
     for (v, gt) in scene.views.iter().zip(&synth.views) {
         let (n, f) = v.depth_range.unwrap();
-        assert!((n - gt.depth_bounds.0 * sc).abs() < 1e-4 && (f - gt.depth_bounds.1 * sc).abs() < 1e-3);
+        assert!(
+            (n - gt.depth_bounds.0 * sc).abs() < 1e-4 && (f - gt.depth_bounds.1 * sc).abs() < 1e-3
+        );
     }
 }
 
@@ -167,17 +211,27 @@ fn rays_follow_each_formats_own_definition() {
     // Blender (NeRF `get_rays` with pixel centres): d = R·[(u+½−W/2)/f, −(v+½−H/2)/f, −1], o = t.
     let (dir, _) = write(SceneFormat::Blender, 32, 2);
     let scene = load(dir.path());
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("transforms_train.json")).unwrap()).unwrap();
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("transforms_train.json")).unwrap(),
+    )
+    .unwrap();
     let f = 16.0 / (0.5 * json["camera_angle_x"].as_f64().unwrap() as f32).tan();
     for (i, frame) in json["frames"].as_array().unwrap().iter().enumerate() {
         let m = |r: usize, c: usize| frame["transform_matrix"][r][c].as_f64().unwrap() as f32;
         let rays = scene.pixel_rays(i, &pixels).unwrap();
         for (k, &(u, v)) in pixels.iter().enumerate() {
-            let c = [(u as f32 + 0.5 - 16.0) / f, -(v as f32 + 0.5 - 16.0) / f, -1.0];
+            let c = [
+                (u as f32 + 0.5 - 16.0) / f,
+                -(v as f32 + 0.5 - 16.0) / f,
+                -1.0,
+            ];
             let d = normalize([0, 1, 2].map(|r| m(r, 0) * c[0] + m(r, 1) * c[1] + m(r, 2) * c[2]));
             close(rays.directions[k], d, "blender direction");
-            close(rays.origins[k], [m(0, 3), m(1, 3), m(2, 3)], "blender origin");
+            close(
+                rays.origins[k],
+                [m(0, 3), m(1, 3), m(2, 3)],
+                "blender origin",
+            );
         }
     }
 
@@ -191,10 +245,21 @@ fn rays_follow_each_formats_own_definition() {
         let (h, w, f) = (m(0, 4), m(1, 4), m(2, 4));
         let rays = scene.pixel_rays(i, &pixels).unwrap();
         for (k, &(u, v)) in pixels.iter().enumerate() {
-            let (x, y) = ((u as f32 + 0.5 - w / 2.0) / f, (v as f32 + 0.5 - h / 2.0) / f);
+            let (x, y) = (
+                (u as f32 + 0.5 - w / 2.0) / f,
+                (v as f32 + 0.5 - h / 2.0) / f,
+            );
             let d = normalize([0, 1, 2].map(|r| m(r, 1) * x + m(r, 0) * y - m(r, 2)));
-            close(rays.directions[k], scene.to_scene.apply_direction(d), "llff direction");
-            close(rays.origins[k], scene.to_scene.apply_point([m(0, 3), m(1, 3), m(2, 3)]), "llff origin");
+            close(
+                rays.directions[k],
+                scene.to_scene.apply_direction(d),
+                "llff direction",
+            );
+            close(
+                rays.origins[k],
+                scene.to_scene.apply_point([m(0, 3), m(1, 3), m(2, 3)]),
+                "llff origin",
+            );
         }
     }
 
@@ -211,9 +276,13 @@ fn rays_follow_each_formats_own_definition() {
         for (k, &(u, v)) in pixels.iter().enumerate() {
             for t in [0.5f32, 2.0, 3.0] {
                 let x = rays.point(k, t);
-                let q = [0, 1, 2].map(|r| (0..3).map(|c| p(r, c) * x[c] as f64).sum::<f64>() + p(r, 3));
+                let q =
+                    [0, 1, 2].map(|r| (0..3).map(|c| p(r, c) * x[c] as f64).sum::<f64>() + p(r, 3));
                 let (pu, pv) = (q[0] / q[2], q[1] / q[2]);
-                assert!((pu - u as f64).abs() < 2e-3 && (pv - v as f64).abs() < 2e-3, "dtu pixel ({u}, {v}) projects to ({pu}, {pv})");
+                assert!(
+                    (pu - u as f64).abs() < 2e-3 && (pv - v as f64).abs() < 2e-3,
+                    "dtu pixel ({u}, {v}) projects to ({pu}, {pv})"
+                );
             }
         }
     }
@@ -227,7 +296,14 @@ fn llff_holds_out_every_eighth_view() {
     assert_eq!(scene.val, vec![0, 8, 16]);
     assert_eq!(scene.train.len(), 14);
     assert!(!scene.train.iter().any(|i| i % 8 == 0));
-    let scene = Scene::load(dir.path(), &LoadOptions { llff_hold: 5, ..Default::default() }).unwrap();
+    let scene = Scene::load(
+        dir.path(),
+        &LoadOptions {
+            llff_hold: 5,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     assert_eq!(scene.test, vec![0, 5, 10, 15]);
 }
 
@@ -238,25 +314,50 @@ fn llff_spiral_orbits_and_looks_at_the_focus_point() {
     let path = spiral_for_scene(&scene, 40).unwrap();
     assert_eq!(path.len(), 40);
     // Independently: NeRF's focus depth from the bounds, in front of the (identity) mean pose.
-    let lo = scene.views.iter().map(|v| v.depth_range.unwrap().0).fold(f32::INFINITY, f32::min);
-    let hi = scene.views.iter().map(|v| v.depth_range.unwrap().1).fold(0.0, f32::max);
+    let lo = scene
+        .views
+        .iter()
+        .map(|v| v.depth_range.unwrap().0)
+        .fold(f32::INFINITY, f32::min);
+    let hi = scene
+        .views
+        .iter()
+        .map(|v| v.depth_range.unwrap().1)
+        .fold(0.0, f32::max);
     let focal = 1.0 / (0.25 / (0.9 * lo) + 0.75 / (5.0 * hi));
     let cams: Vec<Camera> = scene.views.iter().map(|v| v.camera.clone()).collect();
     let avg = average_pose(&cams);
-    let focus = [avg[0][3] - focal * avg[0][2], avg[1][3] - focal * avg[1][2], avg[2][3] - focal * avg[2][2]];
+    let focus = [
+        avg[0][3] - focal * avg[0][2],
+        avg[1][3] - focal * avg[1][2],
+        avg[2][3] - focal * avg[2][2],
+    ];
     let mut max_offset = 0.0f32;
     for cam in &path {
         let to_focus = sub(focus, cam.origin());
         let along = dot(to_focus, cam.forward());
         assert!(along > 0.0);
-        let miss = norm(sub(to_focus, [cam.forward()[0] * along, cam.forward()[1] * along, cam.forward()[2] * along]));
-        assert!(miss < 1e-3 * focal, "spiral camera misses the focus by {miss}");
+        let miss = norm(sub(
+            to_focus,
+            [
+                cam.forward()[0] * along,
+                cam.forward()[1] * along,
+                cam.forward()[2] * along,
+            ],
+        ));
+        assert!(
+            miss < 1e-3 * focal,
+            "spiral camera misses the focus by {miss}"
+        );
         assert!(orthonormality_error(&cam.rotation()) < 1e-5);
         max_offset = max_offset.max(dist(cam.origin(), [avg[0][3], avg[1][3], avg[2][3]]));
     }
     // It moves, within the spread of the real cameras.
     let spread = cams.iter().map(|c| norm(c.origin())).fold(0.0, f32::max);
-    assert!(max_offset > 0.1 * spread && max_offset <= 1.8 * spread, "offset {max_offset}, spread {spread}");
+    assert!(
+        max_offset > 0.1 * spread && max_offset <= 1.8 * spread,
+        "offset {max_offset}, spread {spread}"
+    );
 }
 
 #[test]
@@ -268,13 +369,25 @@ fn dtu_rays_hit_rendered_surface_in_the_unit_sphere_frame() {
     // Intrinsics recovered by the RQ decomposition.
     for (v, gt) in scene.views.iter().zip(&synth.views) {
         let (a, b) = (&v.camera, &gt.camera);
-        for (x, y) in [(a.fx, b.fx), (a.fy, b.fy), (a.cx, b.cx), (a.cy, b.cy), (a.skew, b.skew)] {
+        for (x, y) in [
+            (a.fx, b.fx),
+            (a.fy, b.fy),
+            (a.cx, b.cx),
+            (a.cy, b.cy),
+            (a.skew, b.skew),
+        ] {
             assert!((x - y).abs() < 1e-3, "intrinsics {a:?} vs {b:?}");
         }
     }
     // The unit-sphere frame, computed here from the scale_mat the writer used (×30, shifted).
     let s = synth.scene.to_world;
-    let unit = |p: Vec3| [(p[0] - s.translation[0]) / s.scale, (p[1] - s.translation[1]) / s.scale, (p[2] - s.translation[2]) / s.scale];
+    let unit = |p: Vec3| {
+        [
+            (p[0] - s.translation[0]) / s.scale,
+            (p[1] - s.translation[1]) / s.scale,
+            (p[2] - s.translation[2]) / s.scale,
+        ]
+    };
     assert_rays_hit_surface(&scene, &synth, unit, 1.0 / s.scale, 1e-3);
     // Object points lie within each ray's unit-sphere interval.
     let gt = &synth.views[0];
@@ -284,7 +397,12 @@ fn dtu_rays_hit_rendered_surface_in_the_unit_sphere_frame() {
         .unwrap();
     let rays = scene.pixel_rays(0, &[(x, y)]).unwrap();
     let t = gt.render.depth[(y * gt.render.width + x) as usize] / s.scale;
-    assert!(rays.near[0] < t && t < rays.far[0], "{} < {t} < {}", rays.near[0], rays.far[0]);
+    assert!(
+        rays.near[0] < t && t < rays.far[0],
+        "{} < {t} < {}",
+        rays.near[0],
+        rays.far[0]
+    );
 }
 
 #[test]
@@ -364,18 +482,35 @@ fn strided_patches_span_k_times_s_and_skip_background() {
         assert_eq!(x_max - x_min + s, k * s);
         assert_eq!(y_max - y_min + s, k * s);
         assert!(p.x0 + k * s <= 48 && p.y0 + k * s <= 48);
-        assert!(p.batch.mask.iter().any(|&m| m >= 0.5), "an all-background patch was returned");
+        assert!(
+            p.batch.mask.iter().any(|&m| m >= 0.5),
+            "an all-background patch was returned"
+        );
         // Rays and colours are those of the pixels.
         let pix: Vec<(u32, u32)> = p.batch.pixels.iter().map(|q| (q.x, q.y)).collect();
         let rays = scene.pixel_rays(p.view, &pix).unwrap();
         assert_eq!(rays.directions, p.batch.rays.directions);
-        assert_eq!(p.batch.rgb[5], scene.views[p.view].image.rgb(pix[5].0, pix[5].1));
+        assert_eq!(
+            p.batch.rgb[5],
+            scene.views[p.view].image.rgb(pix[5].0, pix[5].1)
+        );
         redrawn += p.redraws;
     }
-    assert!(redrawn > 0, "with a small object, some random windows are all background and must be redrawn");
+    assert!(
+        redrawn > 0,
+        "with a small object, some random windows are all background and must be redrawn"
+    );
     // A window larger than the image is an error, not a panic.
-    assert!(PatchSampler::new(20, 3, 1).sample(&scene, Split::Train).is_err());
-    assert!(PatchSampler::new(2, 2, 1).sample(&scene, Split::Test).is_ok());
+    assert!(
+        PatchSampler::new(20, 3, 1)
+            .sample(&scene, Split::Train)
+            .is_err()
+    );
+    assert!(
+        PatchSampler::new(2, 2, 1)
+            .sample(&scene, Split::Test)
+            .is_ok()
+    );
 }
 
 #[test]
@@ -396,7 +531,9 @@ fn random_ray_batches_carry_pixel_targets() {
     let ndc = b.rays.to_ndc(24, 18, scene.views[0].camera.fx, 1.0);
     assert!(ndc.origins.iter().all(|o| (o[2] + 1.0).abs() < 1e-4));
     // Patches on a scene without masks are never redrawn.
-    let p = PatchSampler::new(4, 2, 1).sample(&scene, Split::Train).unwrap();
+    let p = PatchSampler::new(4, 2, 1)
+        .sample(&scene, Split::Train)
+        .unwrap();
     assert_eq!(p.redraws, 0);
 }
 
@@ -407,12 +544,24 @@ fn turntable_and_interpolation_paths() {
     let path = turntable_for_scene(&scene, 12).unwrap();
     assert_eq!(path.len(), 12);
     for cam in &path {
-        assert!((norm(cam.origin()) - 4.0).abs() < 1e-3, "radius {}", norm(cam.origin()));
+        assert!(
+            (norm(cam.origin()) - 4.0).abs() < 1e-3,
+            "radius {}",
+            norm(cam.origin())
+        );
         let to_centre = sub([0.0; 3], cam.origin());
         assert!(dot(cam.forward(), to_centre) / norm(to_centre) > 0.99999);
     }
-    assert!(dist(path[0].origin(), path[6].origin()) > 5.0, "opposite sides of the circle");
-    let keys: Vec<Camera> = scene.views.iter().take(3).map(|v| v.camera.clone()).collect();
+    assert!(
+        dist(path[0].origin(), path[6].origin()) > 5.0,
+        "opposite sides of the circle"
+    );
+    let keys: Vec<Camera> = scene
+        .views
+        .iter()
+        .take(3)
+        .map(|v| v.camera.clone())
+        .collect();
     let inter = interpolate(&keys, 5);
     assert_eq!(inter.len(), 11);
     assert_eq!(inter[0].c2w, keys[0].c2w);
@@ -428,7 +577,9 @@ fn turntable_and_interpolation_paths() {
 fn plain_images_load_resize_and_give_a_grid() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("a.jpg");
-    image::RgbImage::from_fn(40, 20, |x, _| image::Rgb([(x * 6) as u8, 100, 200])).save(&p).unwrap();
+    image::RgbImage::from_fn(40, 20, |x, _| image::Rgb([(x * 6) as u8, 100, 200]))
+        .save(&p)
+        .unwrap();
     let img = load_rgb(&p, None).unwrap();
     assert_eq!((img.width, img.height), (40, 20));
     let small = load_rgb(&p, Some((10, 5))).unwrap();
@@ -437,7 +588,9 @@ fn plain_images_load_resize_and_give_a_grid() {
     assert_eq!(grid.len(), 8);
     assert_eq!(grid[0], [-0.75, -0.5]);
     assert_eq!(grid[7], [0.75, 0.5]);
-    let err = load_rgb(&dir.path().join("nope.png"), None).unwrap_err().to_string();
+    let err = load_rgb(&dir.path().join("nope.png"), None)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("nope.png"), "{err}");
 }
 
@@ -491,8 +644,16 @@ fn bad_llff_inputs_are_errors_naming_the_file() {
     // A header that claims far more data than the file holds.
     let mut huge = good.clone();
     let key = b"'shape': (".as_slice();
-    let start = huge.windows(key.len()).position(|w| w == key).expect("shape in header") + key.len();
-    let end = start + huge[start..].iter().position(|&b| b == b'\n').expect("header end");
+    let start = huge
+        .windows(key.len())
+        .position(|w| w == key)
+        .expect("shape in header")
+        + key.len();
+    let end = start
+        + huge[start..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .expect("header end");
     let mut tail = b"99999999999, 17), }".to_vec();
     assert!(tail.len() <= end - start);
     tail.resize(end - start, b' ');
@@ -512,7 +673,9 @@ fn bad_llff_inputs_are_errors_naming_the_file() {
     assert_names(&msg, "images");
     assert_names(&msg, "poses_bounds.npy");
     // Mixed image sizes.
-    image::RgbImage::new(10, 10).save(d.path().join("images").join("image002.png")).unwrap();
+    image::RgbImage::new(10, 10)
+        .save(d.path().join("images").join("image002.png"))
+        .unwrap();
     assert_names(&load_err(d.path()), "image002.png");
 }
 
@@ -525,14 +688,25 @@ fn bad_dtu_inputs_are_errors_naming_the_file() {
     assert_names(&load_err(d.path()), "cameras.npz");
     // A valid zip whose entry is not a valid npy (the archive is stored uncompressed).
     let mut corrupt = good.clone();
-    let at = corrupt.windows(5).position(|w| w == b"descr").expect("npy header in archive");
+    let at = corrupt
+        .windows(5)
+        .position(|w| w == b"descr")
+        .expect("npy header in archive");
     corrupt[at..at + 5].copy_from_slice(b"xxxxx");
     std::fs::write(&npz, &corrupt).unwrap();
     assert_names(&load_err(d.path()), "cameras.npz");
     // Fewer cameras than images.
-    let m = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0].to_vec();
+    let m = [
+        1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0,
+    ]
+    .to_vec();
     let two: Vec<(String, Vec<usize>, Vec<f64>)> = (0..2)
-        .flat_map(|i| [(format!("world_mat_{i}"), vec![4, 4], m.clone()), (format!("scale_mat_{i}"), vec![4, 4], m.clone())])
+        .flat_map(|i| {
+            [
+                (format!("world_mat_{i}"), vec![4, 4], m.clone()),
+                (format!("scale_mat_{i}"), vec![4, 4], m.clone()),
+            ]
+        })
         .collect();
     ins_core::data::npy::write_npz(&npz, &two).unwrap();
     assert_names(&load_err(d.path()), "cameras.npz");
@@ -562,5 +736,10 @@ fn bad_dtu_inputs_are_errors_naming_the_file() {
     assert_names(&load_err(d.path()), &img2.display().to_string());
     // Missing cameras.
     std::fs::remove_file(&npz).unwrap();
-    assert!(Scene::load_as(SceneFormat::Dtu, d.path(), &LoadOptions::default()).unwrap_err().to_string().contains("cameras.npz"));
+    assert!(
+        Scene::load_as(SceneFormat::Dtu, d.path(), &LoadOptions::default())
+            .unwrap_err()
+            .to_string()
+            .contains("cameras.npz")
+    );
 }

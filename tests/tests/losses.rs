@@ -22,7 +22,10 @@ fn random_features(device: &Device, seed: u64) -> VggFeatures {
 #[test]
 fn gram_is_normalised_outer_product() {
     let device = Device::flex();
-    let f = Tensor::<4>::from_floats([[[[1.0, 2.0], [3.0, 4.0]], [[0.0, 1.0], [0.0, 1.0]]]], &device);
+    let f = Tensor::<4>::from_floats(
+        [[[[1.0, 2.0], [3.0, 4.0]], [[0.0, 1.0], [0.0, 1.0]]]],
+        &device,
+    );
     let g = values(gram(f));
     // C·H·W = 8. Row 0·row 0 = 30, row 0·row 1 = 6, row 1·row 1 = 2.
     let expected = [30.0 / 8.0, 6.0 / 8.0, 6.0 / 8.0, 2.0 / 8.0];
@@ -44,7 +47,14 @@ fn style_loss_is_zero_for_identical_inputs_and_positive_otherwise() {
 }
 
 /// Central finite difference of `loss` at element `i` of `x`, in f64 arithmetic on f32 inputs.
-fn finite_difference(x: &[f32], shape: [usize; 4], i: usize, eps: f32, loss: &dyn Fn(Tensor<4>) -> f32, device: &Device) -> f64 {
+fn finite_difference(
+    x: &[f32],
+    shape: [usize; 4],
+    i: usize,
+    eps: f32,
+    loss: &dyn Fn(Tensor<4>) -> f32,
+    device: &Device,
+) -> f64 {
     let eval = |delta: f32| {
         let mut v = x.to_vec();
         v[i] += delta;
@@ -58,7 +68,9 @@ fn style_and_content_gradients_match_finite_differences() {
     let plain = Device::flex();
     let ad = plain.clone().autodiff();
     let target = random_features(&plain, 3);
-    let grams = StyleTarget::from_features(&target).grams.map(|g| g.to_device(&ad));
+    let grams = StyleTarget::from_features(&target)
+        .grams
+        .map(|g| g.to_device(&ad));
     let content = target.relu2_2.clone().to_device(&ad);
     let x_feat = random_features(&plain, 4);
     let shape = [1, 4, 6, 6];
@@ -82,7 +94,11 @@ fn style_and_content_gradients_match_finite_differences() {
     for i in [0, 7, 33, 71, 143] {
         let fd = finite_difference(&x, shape, i, 1e-2, &eval, &ad);
         let rel = (g[i] as f64 - fd).abs() / fd.abs().max(1e-3);
-        assert!(rel < 0.02, "element {i}: autodiff {} vs finite difference {fd}", g[i]);
+        assert!(
+            rel < 0.02,
+            "element {i}: autodiff {} vs finite difference {fd}",
+            g[i]
+        );
     }
 }
 
@@ -101,7 +117,9 @@ fn gradient_through_vgg_to_the_image_matches_finite_differences() {
     let grams = StyleTarget::from_features(&sf).grams;
     let content = sf.relu2_2.detach();
     let shape = [1, 3, 16, 16];
-    let x: Vec<f32> = (0..3 * 16 * 16).map(|i| ((i * 37 % 101) as f32) / 100.0).collect();
+    let x: Vec<f32> = (0..3 * 16 * 16)
+        .map(|i| ((i * 37 % 101) as f32) / 100.0)
+        .collect();
     let loss_of = |t: Tensor<4>| {
         let f = vgg.features(t);
         style_loss(&f, &grams).mul_scalar(1e3) + content_loss(&f, &content)
@@ -120,7 +138,11 @@ fn gradient_through_vgg_to_the_image_matches_finite_differences() {
         }
         checked += 1;
         let rel = (g[i] as f64 - fd).abs() / fd.abs();
-        assert!(rel < 0.05, "pixel {i}: autodiff {} vs finite difference {fd}", g[i]);
+        assert!(
+            rel < 0.05,
+            "pixel {i}: autodiff {} vs finite difference {fd}",
+            g[i]
+        );
     }
     assert!(checked >= 3, "too few informative pixels");
 }

@@ -24,10 +24,14 @@ fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
     let a_dir = dir.path().join("a");
     let a = train(&cfg, vgg.clone(), &device, quiet_options(&a_dir)).unwrap();
     assert!(a.finished);
-    let a_img = ins_models::image_task::render_image(&a.model.valid(), 24, 24, &[1.0], &device).unwrap();
+    let a_img =
+        ins_models::image_task::render_image(&a.model.valid(), 24, 24, &[1.0], &device).unwrap();
     let reloaded = SirenRun::load(&a_dir, &device).unwrap();
     let r_img = reloaded.render(24, 24, &[1.0], &device).unwrap();
-    assert_eq!(a_img.data, r_img.data, "reloaded checkpoint renders differently");
+    assert_eq!(
+        a_img.data, r_img.data,
+        "reloaded checkpoint renders differently"
+    );
 
     // Interrupted after 15 steps (inside fitting, past a checkpoint), then resumed.
     let b_dir = dir.path().join("b");
@@ -42,24 +46,37 @@ fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
     let b2 = train(&cfg, vgg.clone(), &device, o).unwrap();
     assert!(b2.finished);
     assert_eq!(b2.steps, 30);
-    let b_img = SirenRun::load(&b_dir, &device).unwrap().render(24, 24, &[1.0], &device).unwrap();
+    let b_img = SirenRun::load(&b_dir, &device)
+        .unwrap()
+        .render(24, 24, &[1.0], &device)
+        .unwrap();
     let diff = a_img
         .data
         .iter()
         .zip(&b_img.data)
         .map(|(x, y)| (x - y).abs())
         .fold(0.0f32, f32::max);
-    assert!(diff < 1e-5, "resumed run differs from the uninterrupted one by {diff}");
+    assert!(
+        diff < 1e-5,
+        "resumed run differs from the uninterrupted one by {diff}"
+    );
 
     // The metrics log of the resumed run covers every logged step once.
     let log = std::fs::read_to_string(b_dir.join("metrics.jsonl")).unwrap();
     let steps: Vec<u64> = log
         .lines()
-        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["step"]
+                .as_u64()
+                .unwrap()
+        })
         .collect();
     let mut sorted = steps.clone();
     sorted.dedup();
-    assert_eq!(steps, sorted, "duplicated or unordered steps in metrics.jsonl");
+    assert_eq!(
+        steps, sorted,
+        "duplicated or unordered steps in metrics.jsonl"
+    );
 
     // A run folder is not silently overwritten.
     let again = train(&cfg, vgg, &device, quiet_options(&a_dir));

@@ -15,7 +15,11 @@ fn stripes(size: usize) -> RgbImage {
     for v in 0..size {
         for u in 0..size {
             let on = ((u + v) / 4) % 2 == 0;
-            data.extend(if on { [0.9, 0.1, 0.1] } else { [1.0, 0.95, 0.9] });
+            data.extend(if on {
+                [0.9, 0.1, 0.1]
+            } else {
+                [1.0, 0.95, 0.9]
+            });
         }
     }
     RgbImage {
@@ -45,7 +49,13 @@ fn siren_fits_an_image() {
     let mut cfg = small_config(content, vec![style], 32);
     cfg.fit_steps = 300;
     cfg.stylize_steps = 0;
-    let out = train(&cfg, real_vgg(&device), &device, quiet_options(&dir.path().join("run"))).unwrap();
+    let out = train(
+        &cfg,
+        real_vgg(&device),
+        &device,
+        quiet_options(&dir.path().join("run")),
+    )
+    .unwrap();
     let psnr = out.last["psnr"];
     assert!(psnr > 30.0, "PSNR after fitting: {psnr:.2} dB");
     assert!(dir.path().join("run/loss_curve.png").exists());
@@ -72,7 +82,10 @@ fn stylization_moves_towards_the_style_and_keeps_the_content() {
     // Still closer in content to the photo than the painting itself is.
     let kept = content_distance(&vgg, &result, &content_img, &device);
     let painting = content_distance(&vgg, &style_img.resized(48, 48), &content_img, &device);
-    assert!(kept < painting, "content distance {kept} vs the painting's {painting}");
+    assert!(
+        kept < painting,
+        "content distance {kept} vs the painting's {painting}"
+    );
 }
 
 #[test]
@@ -93,8 +106,14 @@ fn two_styles_condition_the_render_and_interpolate_monotonically() {
     let r10 = run.render(48, 48, &[1.0, 0.0], &device).unwrap();
     let r01 = run.render(48, 48, &[0.0, 1.0], &device).unwrap();
     let d = |img: &RgbImage, s: &RgbImage| style_distance(&vgg, img, s, &device);
-    assert!(d(&r10, &s1) < d(&r10, &s2), "[1,0] render is not nearer style 1");
-    assert!(d(&r01, &s2) < d(&r01, &s1), "[0,1] render is not nearer style 2");
+    assert!(
+        d(&r10, &s1) < d(&r10, &s2),
+        "[1,0] render is not nearer style 1"
+    );
+    assert!(
+        d(&r01, &s2) < d(&r01, &s1),
+        "[0,1] render is not nearer style 2"
+    );
     // Along the interpolation the render moves away from style 1 towards style 2.
     let steps: Vec<f32> = (0..5)
         .map(|i| {
@@ -104,6 +123,9 @@ fn two_styles_condition_the_render_and_interpolate_monotonically() {
         })
         .collect();
     for w in steps.windows(2) {
-        assert!(w[1] < w[0], "distance ratio to style 2 / style 1 is not decreasing: {steps:?}");
+        assert!(
+            w[1] < w[0],
+            "distance ratio to style 2 / style 1 is not decreasing: {steps:?}"
+        );
     }
 }

@@ -59,10 +59,15 @@ fn real_vgg16_matches_onnxruntime() {
 
 #[test]
 fn missing_file_is_a_clear_error() {
-    let e = read_vgg_onnx(std::path::Path::new("/nonexistent/vgg.onnx")).err().unwrap();
+    let e = read_vgg_onnx(std::path::Path::new("/nonexistent/vgg.onnx"))
+        .err()
+        .unwrap();
     assert!(matches!(e, VggError::Missing { .. }));
     let msg = e.to_string();
-    assert!(msg.contains("/nonexistent/vgg.onnx") && msg.contains("vgg fetch"), "{msg}");
+    assert!(
+        msg.contains("/nonexistent/vgg.onnx") && msg.contains("vgg fetch"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -94,7 +99,10 @@ fn wrong_shapes_are_a_clear_error() {
     let e = read_vgg_onnx(&p).err().unwrap();
     match &e {
         VggError::WrongShape {
-            index, found, expected, ..
+            index,
+            found,
+            expected,
+            ..
         } => {
             assert_eq!(*index, 1);
             assert_eq!(found, &vec![4, 3, 3, 3]);

@@ -6,7 +6,9 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum VggError {
     /// The file does not exist.
-    #[error("VGG weights not found at {path}. Run `ins-cli vgg fetch` to download the default VGG-16, or pass --onnx FILE")]
+    #[error(
+        "VGG weights not found at {path}. Run `ins-cli vgg fetch` to download the default VGG-16, or pass --onnx FILE"
+    )]
     Missing {
         /// The path.
         path: PathBuf,
@@ -20,7 +22,9 @@ pub enum VggError {
         reason: String,
     },
     /// Fewer than 10 convolutions.
-    #[error("{path} has {found} convolutions; a VGG-16 feature extractor needs the first 10 (up to relu4_3)")]
+    #[error(
+        "{path} has {found} convolutions; a VGG-16 feature extractor needs the first 10 (up to relu4_3)"
+    )]
     TooFewConvolutions {
         /// The path.
         path: PathBuf,

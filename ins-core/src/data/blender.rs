@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
+use super::DataError;
 use super::images::{parallel_map, read_image};
 use super::scene::{LoadOptions, Scene, SceneFormat, Split, View};
-use super::DataError;
 use crate::render::camera::Camera;
 use crate::render::geometry::{Bounds, Similarity};
 
@@ -46,7 +46,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         if !path.exists() {
             let required = opts.splits.is_some() || split == Split::Train;
             if required {
-                return Err(DataError::missing(&path, format!("camera file of the {split} split")));
+                return Err(DataError::missing(
+                    &path,
+                    format!("camera file of the {split} split"),
+                ));
             }
             continue;
         }
@@ -57,7 +60,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         frames.extend(fs.into_iter().map(|f| (split, f)));
     }
     let Some((intr_path, intr)) = intr else {
-        return Err(DataError::missing(&dir.join("transforms_train.json"), "no transforms file"));
+        return Err(DataError::missing(
+            &dir.join("transforms_train.json"),
+            "no transforms file",
+        ));
     };
     if frames.is_empty() {
         return Err(DataError::invalid(&intr_path, "no frames"));
@@ -68,7 +74,12 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     let decoded = parallel_map(&paths, |p| {
         let (img, alpha) = read_image(p)?.composite_on_white();
         if factor > 1 {
-            Ok((img.width, img.height, img.downscaled(factor), alpha.map(|a| a.downscaled(factor))))
+            Ok((
+                img.width,
+                img.height,
+                img.downscaled(factor),
+                alpha.map(|a| a.downscaled(factor)),
+            ))
         } else {
             Ok((img.width, img.height, img, alpha))
         }
@@ -81,7 +92,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         if (w, h) != (w0, h0) {
             return Err(DataError::invalid(
                 &frame.image,
-                format!("image is {w}×{h} but {} is {w0}×{h0}: mixed image sizes", paths[0].display()),
+                format!(
+                    "image is {w}×{h} but {} is {w0}×{h0}: mixed image sizes",
+                    paths[0].display()
+                ),
             ));
         }
         let full = match (intr.fl, intr.fov_x) {
@@ -97,15 +111,31 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
                 }
                 c
             }
-            (None, None) => return Err(DataError::json(&intr_path, "neither camera_angle_x nor fl_x given")),
+            (None, None) => {
+                return Err(DataError::json(
+                    &intr_path,
+                    "neither camera_angle_x nor fl_x given",
+                ));
+            }
         };
-        let camera = if factor > 1 { full.downscaled(factor) } else { full };
+        let camera = if factor > 1 {
+            full.downscaled(factor)
+        } else {
+            full
+        };
         match split {
             Split::Train => train.push(i),
             Split::Val => val.push(i),
             Split::Test => test.push(i),
         }
-        views.push(View { camera, image, mask: alpha, path: frame.image, mask_path: None, depth_range: None });
+        views.push(View {
+            camera,
+            image,
+            mask: alpha,
+            path: frame.image,
+            mask_path: None,
+            depth_range: None,
+        });
     }
     Ok(Scene {
         name: super::folder_name(dir),
@@ -117,7 +147,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         test,
         near: NEAR,
         far: FAR,
-        bounds: Bounds::Aabb { min: [-HALF_EXTENT; 3], max: [HALF_EXTENT; 3] },
+        bounds: Bounds::Aabb {
+            min: [-HALF_EXTENT; 3],
+            max: [HALF_EXTENT; 3],
+        },
         per_ray_range: false,
         to_scene: Similarity::identity(),
         white_background: true,
@@ -127,11 +160,15 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
 /// Parses one transforms file into its intrinsics and frames (image paths resolved).
 fn read_transforms(path: &Path, dir: &Path) -> Result<(Intrinsics, Vec<Frame>), DataError> {
     let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
-    let json: Value = serde_json::from_str(&text).map_err(|e| DataError::json(path, e.to_string()))?;
+    let json: Value =
+        serde_json::from_str(&text).map_err(|e| DataError::json(path, e.to_string()))?;
     let num = |key: &str| -> Result<Option<f32>, DataError> {
         match json.get(key) {
             None => Ok(None),
-            Some(v) => v.as_f64().map(|x| Some(x as f32)).ok_or_else(|| DataError::json(path, format!("{key} is not a number"))),
+            Some(v) => v
+                .as_f64()
+                .map(|x| Some(x as f32))
+                .ok_or_else(|| DataError::json(path, format!("{key} is not a number"))),
         }
     };
     let fov_x = num("camera_angle_x")?;
@@ -150,9 +187,15 @@ fn read_transforms(path: &Path, dir: &Path) -> Result<(Intrinsics, Vec<Frame>), 
     if let Some(f) = fov_x
         && !(f > 0.0 && f < std::f32::consts::PI)
     {
-        return Err(DataError::json(path, format!("camera_angle_x = {f} is not an angle in (0, π)")));
+        return Err(DataError::json(
+            path,
+            format!("camera_angle_x = {f} is not an angle in (0, π)"),
+        ));
     }
-    let frames_json = json.get("frames").and_then(Value::as_array).ok_or_else(|| DataError::json(path, "missing frames array"))?;
+    let frames_json = json
+        .get("frames")
+        .and_then(Value::as_array)
+        .ok_or_else(|| DataError::json(path, "missing frames array"))?;
     let mut frames = Vec::with_capacity(frames_json.len());
     for (i, f) in frames_json.iter().enumerate() {
         let file = f
@@ -162,8 +205,16 @@ fn read_transforms(path: &Path, dir: &Path) -> Result<(Intrinsics, Vec<Frame>), 
         let m = f
             .get("transform_matrix")
             .ok_or_else(|| DataError::json(path, format!("frame {i}: missing transform_matrix")))?;
-        let c2w = matrix_3x4(m).ok_or_else(|| DataError::json(path, format!("frame {i}: transform_matrix is not a 4×4 array of numbers")))?;
-        frames.push(Frame { image: resolve_image(dir, file), c2w });
+        let c2w = matrix_3x4(m).ok_or_else(|| {
+            DataError::json(
+                path,
+                format!("frame {i}: transform_matrix is not a 4×4 array of numbers"),
+            )
+        })?;
+        frames.push(Frame {
+            image: resolve_image(dir, file),
+            c2w,
+        });
     }
     Ok((Intrinsics { fov_x, fl, c }, frames))
 }

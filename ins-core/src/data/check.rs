@@ -4,7 +4,9 @@
 use serde::Serialize;
 
 use super::scene::{Scene, SceneFormat, Split};
-use crate::render::geometry::{Bounds, add, dot, norm, normalize, orthonormality_error, scale, sub};
+use crate::render::geometry::{
+    Bounds, add, dot, norm, normalize, orthonormality_error, scale, sub,
+};
 
 /// What a scene holds.
 #[derive(Clone, Debug, Serialize)]
@@ -88,15 +90,24 @@ pub fn check_scene(scene: &Scene) -> Report {
     match scene.format {
         SceneFormat::Dtu => {
             checks.push(center_in_masks(scene));
-            checks.push(mask_rays_hit_bounds(scene, "mask pixel rays hit the unit sphere"));
+            checks.push(mask_rays_hit_bounds(
+                scene,
+                "mask pixel rays hit the unit sphere",
+            ));
         }
-        SceneFormat::Blender => checks.push(mask_rays_hit_bounds(scene, "opaque pixel rays pass through the bounding box")),
+        SceneFormat::Blender => checks.push(mask_rays_hit_bounds(
+            scene,
+            "opaque pixel rays pass through the bounding box",
+        )),
         SceneFormat::Llff => {
             checks.push(same_direction(scene));
             checks.push(near_points_in_frame(scene));
         }
     }
-    Report { summary: summarize(scene), checks }
+    Report {
+        summary: summarize(scene),
+        checks,
+    }
 }
 
 /// The summary part alone.
@@ -105,8 +116,16 @@ pub fn summarize(scene: &Scene) -> Summary {
     let first = scene.views.first().map(|v| &v.camera);
     let fxs: Vec<f32> = scene.views.iter().map(|v| v.camera.fx).collect();
     let c = scene.bounds.center();
-    let dists: Vec<f32> = scene.views.iter().map(|v| norm(sub(v.camera.origin(), c))).collect();
-    let masked: Vec<f32> = scene.views.iter().filter_map(|v| v.mask.as_ref().map(|m| m.coverage())).collect();
+    let dists: Vec<f32> = scene
+        .views
+        .iter()
+        .map(|v| norm(sub(v.camera.origin(), c)))
+        .collect();
+    let masked: Vec<f32> = scene
+        .views
+        .iter()
+        .filter_map(|v| v.mask.as_ref().map(|m| m.coverage()))
+        .collect();
     Summary {
         name: scene.name.clone(),
         format: scene.format,
@@ -125,7 +144,8 @@ pub fn summarize(scene: &Scene) -> Summary {
         bounds: scene.bounds,
         per_ray_range: scene.per_ray_range,
         masks: masked.len(),
-        mean_mask_coverage: (!masked.is_empty()).then(|| masked.iter().sum::<f32>() / masked.len() as f32),
+        mean_mask_coverage: (!masked.is_empty())
+            .then(|| masked.iter().sum::<f32>() / masked.len() as f32),
         camera_distance: min_max(&dists),
         to_scene_scale: scene.to_scene.scale,
     }
@@ -135,15 +155,29 @@ fn min_max(v: &[f32]) -> [f32; 2] {
     if v.is_empty() {
         return [0.0; 2];
     }
-    [v.iter().copied().fold(f32::INFINITY, f32::min), v.iter().copied().fold(f32::NEG_INFINITY, f32::max)]
+    [
+        v.iter().copied().fold(f32::INFINITY, f32::min),
+        v.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+    ]
 }
 
 fn check(name: &str, passed: usize, total: usize, failures: &[String]) -> Check {
-    let mut note = failures.iter().take(5).cloned().collect::<Vec<_>>().join("; ");
+    let mut note = failures
+        .iter()
+        .take(5)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join("; ");
     if failures.len() > 5 {
         note.push_str(&format!("; … {} more", failures.len() - 5));
     }
-    Check { name: name.to_string(), passed, total, ok: passed == total && total > 0, note }
+    Check {
+        name: name.to_string(),
+        passed,
+        total,
+        ok: passed == total && total > 0,
+        note,
+    }
 }
 
 fn rotations(scene: &Scene) -> Check {
@@ -154,7 +188,12 @@ fn rotations(scene: &Scene) -> Check {
             fails.push(format!("view {i}: |RᵀR − I| = {e:.2e}"));
         }
     }
-    check("camera rotations are orthonormal", scene.views.len() - fails.len(), scene.views.len(), &fails)
+    check(
+        "camera rotations are orthonormal",
+        scene.views.len() - fails.len(),
+        scene.views.len(),
+        &fails,
+    )
 }
 
 fn look_at_bounds(scene: &Scene) -> Check {
@@ -165,7 +204,12 @@ fn look_at_bounds(scene: &Scene) -> Check {
             fails.push(format!("view {i}"));
         }
     }
-    check("principal rays meet the bounding volume", scene.views.len() - fails.len(), scene.views.len(), &fails)
+    check(
+        "principal rays meet the bounding volume",
+        scene.views.len() - fails.len(),
+        scene.views.len(),
+        &fails,
+    )
 }
 
 /// Up to `per_view` foreground pixels of each masked view, spread over the image.
@@ -173,13 +217,23 @@ fn foreground_samples(scene: &Scene, per_view: usize) -> Vec<(usize, u32, u32)> 
     let mut out = Vec::new();
     for (i, v) in scene.views.iter().enumerate() {
         let Some(m) = &v.mask else { continue };
-        let fg: Vec<usize> = m.data.iter().enumerate().filter(|&(_, &x)| x >= 128).map(|(k, _)| k).collect();
+        let fg: Vec<usize> = m
+            .data
+            .iter()
+            .enumerate()
+            .filter(|&(_, &x)| x >= 128)
+            .map(|(k, _)| k)
+            .collect();
         if fg.is_empty() {
             continue;
         }
         let step = (fg.len() / per_view).max(1);
         for &k in fg.iter().step_by(step).take(per_view) {
-            out.push((i, (k % m.width as usize) as u32, (k / m.width as usize) as u32));
+            out.push((
+                i,
+                (k % m.width as usize) as u32,
+                (k / m.width as usize) as u32,
+            ));
         }
     }
     out
@@ -208,27 +262,51 @@ fn center_in_masks(scene: &Scene) -> Check {
             Some(p) if v.camera.in_frame(p) => {
                 let val = m.value(p[0] as u32, p[1] as u32);
                 if val < 0.5 {
-                    fails.push(format!("view {i}: centre at ({:.0}, {:.0}) is background", p[0], p[1]));
+                    fails.push(format!(
+                        "view {i}: centre at ({:.0}, {:.0}) is background",
+                        p[0], p[1]
+                    ));
                 }
             }
-            Some(p) => fails.push(format!("view {i}: centre at ({:.0}, {:.0}) is out of frame", p[0], p[1])),
+            Some(p) => fails.push(format!(
+                "view {i}: centre at ({:.0}, {:.0}) is out of frame",
+                p[0], p[1]
+            )),
             None => fails.push(format!("view {i}: centre is behind the camera")),
         }
     }
-    check("bounding-sphere centre projects inside every mask", total - fails.len(), total, &fails)
+    check(
+        "bounding-sphere centre projects inside every mask",
+        total - fails.len(),
+        total,
+        &fails,
+    )
 }
 
 fn same_direction(scene: &Scene) -> Check {
-    let mean = normalize(scene.views.iter().fold([0.0; 3], |a, v| add(a, v.camera.forward())));
+    let mean = normalize(
+        scene
+            .views
+            .iter()
+            .fold([0.0; 3], |a, v| add(a, v.camera.forward())),
+    );
     let cos_max = 30f32.to_radians().cos();
     let mut fails = Vec::new();
     for (i, v) in scene.views.iter().enumerate() {
         let c = dot(v.camera.forward(), mean);
         if c < cos_max {
-            fails.push(format!("view {i}: {:.1}° off the mean", c.clamp(-1.0, 1.0).acos().to_degrees()));
+            fails.push(format!(
+                "view {i}: {:.1}° off the mean",
+                c.clamp(-1.0, 1.0).acos().to_degrees()
+            ));
         }
     }
-    check("cameras face the same way (within 30°)", scene.views.len() - fails.len(), scene.views.len(), &fails)
+    check(
+        "cameras face the same way (within 30°)",
+        scene.views.len() - fails.len(),
+        scene.views.len(),
+        &fails,
+    )
 }
 
 fn near_points_in_frame(scene: &Scene) -> Check {
@@ -246,5 +324,10 @@ fn near_points_in_frame(scene: &Scene) -> Check {
             }
         }
     }
-    check("each view's centre point at its near depth is in frame in every view", total - fails.len(), total, &fails)
+    check(
+        "each view's centre point at its near depth is in frame in every view",
+        total - fails.len(),
+        total,
+        &fails,
+    )
 }

@@ -14,7 +14,11 @@ pub fn contact_sheet(scene: &Scene, max_views: usize, thumb_width: u32) -> Image
     let n_all = scene.views.len();
     let n = n_all.min(max_views.max(1));
     if n == 0 {
-        return Image { width: 1, height: 1, data: vec![0; 3] };
+        return Image {
+            width: 1,
+            height: 1,
+            data: vec![0; 3],
+        };
     }
     let picks: Vec<usize> = (0..n).map(|k| k * n_all / n).collect();
     let (w0, h0) = scene.resolution();
@@ -24,7 +28,11 @@ pub fn contact_sheet(scene: &Scene, max_views: usize, thumb_width: u32) -> Image
     let rows = (n as u32).div_ceil(cols);
     let gap = 4;
     let (sw, sh) = (cols * (tw + gap) + gap, rows * (th + gap) + gap);
-    let mut sheet = Image { width: sw, height: sh, data: vec![40; (sw * sh * 3) as usize] };
+    let mut sheet = Image {
+        width: sw,
+        height: sh,
+        data: vec![40; (sw * sh * 3) as usize],
+    };
     for (k, &vi) in picks.iter().enumerate() {
         let view = &scene.views[vi];
         let mut thumb = view.image.resized(tw, th);
@@ -49,19 +57,38 @@ pub fn contact_sheet(scene: &Scene, max_views: usize, thumb_width: u32) -> Image
         };
         for (a, b) in scene.bounds.outline() {
             if let Some((p, q)) = project_segment(&view.camera, a, b) {
-                draw_line(&mut thumb, [p[0] * s, p[1] * s], [q[0] * s, q[1] * s], colour);
+                draw_line(
+                    &mut thumb,
+                    [p[0] * s, p[1] * s],
+                    [q[0] * s, q[1] * s],
+                    colour,
+                );
             }
         }
         if let Some(c) = view.camera.project(scene.bounds.center()) {
             let c = [c[0] * s, c[1] * s];
-            draw_line(&mut thumb, [c[0] - 4.0, c[1]], [c[0] + 4.0, c[1]], [255, 40, 40]);
-            draw_line(&mut thumb, [c[0], c[1] - 4.0], [c[0], c[1] + 4.0], [255, 40, 40]);
+            draw_line(
+                &mut thumb,
+                [c[0] - 4.0, c[1]],
+                [c[0] + 4.0, c[1]],
+                [255, 40, 40],
+            );
+            draw_line(
+                &mut thumb,
+                [c[0], c[1] - 4.0],
+                [c[0], c[1] + 4.0],
+                [255, 40, 40],
+            );
         }
-        let (ox, oy) = (gap + (k as u32 % cols) * (tw + gap), gap + (k as u32 / cols) * (th + gap));
+        let (ox, oy) = (
+            gap + (k as u32 % cols) * (tw + gap),
+            gap + (k as u32 / cols) * (th + gap),
+        );
         for y in 0..th {
             let src = ((y * tw) * 3) as usize;
             let dst = (((oy + y) * sw + ox) * 3) as usize;
-            sheet.data[dst..dst + (tw * 3) as usize].copy_from_slice(&thumb.data[src..src + (tw * 3) as usize]);
+            sheet.data[dst..dst + (tw * 3) as usize]
+                .copy_from_slice(&thumb.data[src..src + (tw * 3) as usize]);
         }
     }
     sheet
@@ -77,7 +104,11 @@ fn project_segment(cam: &Camera, a: Vec3, b: Vec3) -> Option<([f32; 2], [f32; 2]
     }
     let clip = |p: Vec3, q: Vec3, zp: f32, zq: f32| -> Vec3 {
         let t = (eps - zp) / (zq - zp);
-        [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1]), p[2] + t * (q[2] - p[2])]
+        [
+            p[0] + t * (q[0] - p[0]),
+            p[1] + t * (q[1] - p[1]),
+            p[2] + t * (q[2] - p[2]),
+        ]
     };
     let ca2 = if za < eps { clip(ca, cb, za, zb) } else { ca };
     let cb2 = if zb < eps { clip(cb, ca, zb, za) } else { cb };
@@ -94,7 +125,12 @@ fn draw_line(img: &mut Image, p: [f32; 2], q: [f32; 2], colour: [u8; 3]) {
     let (w, h) = (img.width as f32, img.height as f32);
     let d = [q[0] - p[0], q[1] - p[1]];
     let (mut t0, mut t1) = (0.0f32, 1.0f32);
-    for (pk, qk) in [(-d[0], p[0]), (d[0], w - 1.0 - p[0]), (-d[1], p[1]), (d[1], h - 1.0 - p[1])] {
+    for (pk, qk) in [
+        (-d[0], p[0]),
+        (d[0], w - 1.0 - p[0]),
+        (-d[1], p[1]),
+        (d[1], h - 1.0 - p[1]),
+    ] {
         if pk == 0.0 {
             if qk < 0.0 {
                 return;

@@ -32,9 +32,14 @@ pub struct Decomposed {
 /// Splits `P = λ·K·[R | −R·C]` (any non-zero scale λ, either sign) into `K`, `R` and `C` by
 /// an RQ decomposition (Gram–Schmidt from the last row up). `None` when `P[:, :3]` is singular.
 pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Option<Decomposed> {
-    let mut m = [[p[0][0], p[0][1], p[0][2]], [p[1][0], p[1][1], p[1][2]], [p[2][0], p[2][1], p[2][2]]];
+    let mut m = [
+        [p[0][0], p[0][1], p[0][2]],
+        [p[1][0], p[1][1], p[1][2]],
+        [p[2][0], p[2][1], p[2][2]],
+    ];
     let mut p4 = [p[0][3], p[1][3], p[2][3]];
-    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
     if !det.is_finite() || det == 0.0 {
         return None;
@@ -45,7 +50,8 @@ pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Option<Decomposed> {
         p4 = p4.map(|v| -v);
     }
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let axpy = |a: [f64; 3], s: f64, b: [f64; 3]| [a[0] - s * b[0], a[1] - s * b[1], a[2] - s * b[2]];
+    let axpy =
+        |a: [f64; 3], s: f64, b: [f64; 3]| [a[0] - s * b[0], a[1] - s * b[1], a[2] - s * b[2]];
     let k22 = dot(m[2], m[2]).sqrt();
     let r2 = m[2].map(|v| v / k22);
     let k12 = dot(m[1], r2);
@@ -60,10 +66,18 @@ pub fn decompose_projection(p: &[[f64; 4]; 3]) -> Option<Decomposed> {
     if !(k00 > 0.0 && k11 > 0.0 && k22 > 0.0) {
         return None;
     }
-    let k = [[k00 / k22, k01 / k22, k02 / k22], [0.0, k11 / k22, k12 / k22], [0.0, 0.0, 1.0]];
+    let k = [
+        [k00 / k22, k01 / k22, k02 / k22],
+        [0.0, k11 / k22, k12 / k22],
+        [0.0, 0.0, 1.0],
+    ];
     let minv = inverse3_f64(&m)?;
     let center = [0, 1, 2].map(|r| -(minv[r][0] * p4[0] + minv[r][1] * p4[1] + minv[r][2] * p4[2]));
-    Some(Decomposed { k, r: [r0, r1, r2], center })
+    Some(Decomposed {
+        k,
+        r: [r0, r1, r2],
+        center,
+    })
 }
 
 impl Decomposed {
@@ -76,7 +90,12 @@ impl Decomposed {
         // c2w rotation (OpenCV) = Rᵀ; OpenGL flips the y and z columns.
         let mut c2w = [[0.0f32; 4]; 3];
         for row in 0..3 {
-            c2w[row] = [r[0][row] as f32, -r[1][row] as f32, -r[2][row] as f32, self.center[row] as f32];
+            c2w[row] = [
+                r[0][row] as f32,
+                -r[1][row] as f32,
+                -r[2][row] as f32,
+                self.center[row] as f32,
+            ];
         }
         let k = &self.k;
         Camera {
@@ -98,39 +117,67 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         .iter()
         .map(|f| dir.join(f))
         .find(|p| p.is_file())
-        .ok_or_else(|| DataError::missing(&dir.join("cameras.npz"), "DTU cameras (cameras.npz or cameras_sphere.npz)"))?;
+        .ok_or_else(|| {
+            DataError::missing(
+                &dir.join("cameras.npz"),
+                "DTU cameras (cameras.npz or cameras_sphere.npz)",
+            )
+        })?;
     let img_dir = ["image", "images"]
         .iter()
         .map(|f| dir.join(f))
         .find(|p| p.is_dir())
-        .ok_or_else(|| DataError::missing(&dir.join("image"), "image folder (image/ or images/)"))?;
+        .ok_or_else(|| {
+            DataError::missing(&dir.join("image"), "image folder (image/ or images/)")
+        })?;
     let files = list_images(&img_dir)?;
     if files.is_empty() {
         return Err(DataError::invalid(&img_dir, "no images"));
     }
     let mask_dir = dir.join("mask");
-    let mask_files = if mask_dir.is_dir() { Some(list_images(&mask_dir)?) } else { None };
+    let mask_files = if mask_dir.is_dir() {
+        Some(list_images(&mask_dir)?)
+    } else {
+        None
+    };
     if let Some(masks) = &mask_files {
         if masks.len() > files.len() {
             return Err(DataError::invalid(
                 &masks[files.len()],
-                format!("mask without an image: {} masks but {} images in {}", masks.len(), files.len(), img_dir.display()),
+                format!(
+                    "mask without an image: {} masks but {} images in {}",
+                    masks.len(),
+                    files.len(),
+                    img_dir.display()
+                ),
             ));
         }
         if masks.len() < files.len() {
             return Err(DataError::invalid(
                 &files[masks.len()],
-                format!("image without a mask: {} images but {} masks in {}", files.len(), masks.len(), mask_dir.display()),
+                format!(
+                    "image without a mask: {} images but {} masks in {}",
+                    files.len(),
+                    masks.len(),
+                    mask_dir.display()
+                ),
             ));
         }
     }
 
     let npz = read_npz(&cam_path)?;
-    let n_world = npz.keys().filter(|k| k.starts_with("world_mat_") && !k.starts_with("world_mat_inv")).count();
+    let n_world = npz
+        .keys()
+        .filter(|k| k.starts_with("world_mat_") && !k.starts_with("world_mat_inv"))
+        .count();
     if n_world != files.len() {
         return Err(DataError::invalid(
             &cam_path,
-            format!("{n_world} world_mat_* entries but {} images in {}: counts do not match", files.len(), img_dir.display()),
+            format!(
+                "{n_world} world_mat_* entries but {} images in {}: counts do not match",
+                files.len(),
+                img_dir.display()
+            ),
         ));
     }
     let mut decomposed = Vec::with_capacity(files.len());
@@ -147,23 +194,39 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
                 p[r][c] = (0..4).map(|k| world[r][k] * scale[k][c]).sum();
             }
         }
-        let d = decompose_projection(&p)
-            .ok_or_else(|| DataError::invalid(&cam_path, format!("world_mat_{i} · scale_mat_{i} is not a valid projection")))?;
+        let d = decompose_projection(&p).ok_or_else(|| {
+            DataError::invalid(
+                &cam_path,
+                format!("world_mat_{i} · scale_mat_{i} is not a valid projection"),
+            )
+        })?;
         decomposed.push(d);
     }
     let scale0 = first_scale.ok_or_else(|| DataError::invalid(&cam_path, "no cameras"))?;
-    let to_scene = similarity_inverse(&scale0)
-        .ok_or_else(|| DataError::invalid(&cam_path, "scale_mat_0 is not a uniform scale, rotation and translation"))?;
+    let to_scene = similarity_inverse(&scale0).ok_or_else(|| {
+        DataError::invalid(
+            &cam_path,
+            "scale_mat_0 is not a uniform scale, rotation and translation",
+        )
+    })?;
 
     let factor = opts.downscale.max(1);
     let images = parallel_map(&files, |p| {
         let (img, _) = read_image(p)?.composite_on_white();
-        Ok(if factor > 1 { img.downscaled(factor) } else { img })
+        Ok(if factor > 1 {
+            img.downscaled(factor)
+        } else {
+            img
+        })
     })?;
     let masks = match &mask_files {
         Some(m) => Some(parallel_map(m, |p| {
             let mask = read_mask(p)?;
-            Ok(if factor > 1 { mask.downscaled(factor) } else { mask })
+            Ok(if factor > 1 {
+                mask.downscaled(factor)
+            } else {
+                mask
+            })
         })?),
         None => None,
     };
@@ -174,16 +237,28 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         if (image.width, image.height) != (w, h) {
             return Err(DataError::invalid(
                 path,
-                format!("image is {}×{} but {} is {w}×{h}: mixed image sizes", image.width, image.height, files[0].display()),
+                format!(
+                    "image is {}×{} but {} is {w}×{h}: mixed image sizes",
+                    image.width,
+                    image.height,
+                    files[0].display()
+                ),
             ));
         }
         let (mask, mask_path) = match (&mut masks_iter, &mask_files) {
             (Some(it), Some(mf)) => {
-                let m = it.next().ok_or_else(|| DataError::invalid(&mask_dir, "fewer masks than images"))?;
+                let m = it
+                    .next()
+                    .ok_or_else(|| DataError::invalid(&mask_dir, "fewer masks than images"))?;
                 if (m.width, m.height) != (w, h) {
                     return Err(DataError::invalid(
                         &mf[i],
-                        format!("mask is {}×{} but its image {} is {w}×{h}", m.width, m.height, path.display()),
+                        format!(
+                            "mask is {}×{} but its image {} is {w}×{h}",
+                            m.width,
+                            m.height,
+                            path.display()
+                        ),
                     ));
                 }
                 (Some(m), Some(mf[i].clone()))
@@ -191,10 +266,24 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
             _ => (None, None),
         };
         let full = decomposed[i].camera(w * factor, h * factor);
-        let camera = if factor > 1 { full.downscaled(factor) } else { full };
-        views.push(View { camera, image, mask, path: path.clone(), mask_path, depth_range: None });
+        let camera = if factor > 1 {
+            full.downscaled(factor)
+        } else {
+            full
+        };
+        views.push(View {
+            camera,
+            image,
+            mask,
+            path: path.clone(),
+            mask_path,
+            depth_range: None,
+        });
     }
-    let dists: Vec<f32> = views.iter().map(|v| crate::render::geometry::norm(v.camera.origin())).collect();
+    let dists: Vec<f32> = views
+        .iter()
+        .map(|v| crate::render::geometry::norm(v.camera.origin()))
+        .collect();
     let near = dists.iter().fold(f32::INFINITY, |a, &d| a.min(d)) - 1.0;
     let far = dists.iter().fold(0.0f32, |a, &d| a.max(d)) + 1.0;
     Ok(Scene {
@@ -207,7 +296,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         views,
         near: near.max(0.0),
         far,
-        bounds: Bounds::Sphere { center: [0.0; 3], radius: 1.0 },
+        bounds: Bounds::Sphere {
+            center: [0.0; 3],
+            radius: 1.0,
+        },
         per_ray_range: true,
         to_scene,
         white_background: false,
@@ -215,15 +307,32 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
 }
 
 /// A 4×4 (or 3×4, completed with `[0, 0, 0, 1]`) matrix from the archive.
-fn matrix(npz: &BTreeMap<String, Array>, path: &Path, name: &str) -> Result<[[f64; 4]; 4], DataError> {
-    let a = npz.get(name).ok_or_else(|| DataError::invalid(path, format!("{name} missing")))?;
+fn matrix(
+    npz: &BTreeMap<String, Array>,
+    path: &Path,
+    name: &str,
+) -> Result<[[f64; 4]; 4], DataError> {
+    let a = npz
+        .get(name)
+        .ok_or_else(|| DataError::invalid(path, format!("{name} missing")))?;
     if a.shape.len() != 2 || a.shape[1] != 4 || !(a.shape[0] == 3 || a.shape[0] == 4) {
-        return Err(DataError::npy(path, format!("{name} has shape {:?}, expected (4, 4) or (3, 4)", a.shape)));
+        return Err(DataError::npy(
+            path,
+            format!("{name} has shape {:?}, expected (4, 4) or (3, 4)", a.shape),
+        ));
     }
     if a.data.iter().any(|v| !v.is_finite()) {
-        return Err(DataError::npy(path, format!("{name} contains NaN or infinite values")));
+        return Err(DataError::npy(
+            path,
+            format!("{name} contains NaN or infinite values"),
+        ));
     }
-    let mut m = [[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+    let mut m = [
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
     for (r, row) in m.iter_mut().enumerate().take(a.shape[0]) {
         for (c, v) in row.iter_mut().enumerate() {
             *v = a.at2(r, c);
@@ -234,12 +343,21 @@ fn matrix(npz: &BTreeMap<String, Array>, path: &Path, name: &str) -> Result<[[f6
 
 /// The similarity `scale_mat⁻¹` (world → unit sphere), when `scale_mat` is one.
 fn similarity_inverse(s: &[[f64; 4]; 4]) -> Option<Similarity> {
-    let a = [[s[0][0], s[0][1], s[0][2]], [s[1][0], s[1][1], s[1][2]], [s[2][0], s[2][1], s[2][2]]];
+    let a = [
+        [s[0][0], s[0][1], s[0][2]],
+        [s[1][0], s[1][1], s[1][2]],
+        [s[2][0], s[2][1], s[2][2]],
+    ];
     let inv = inverse3_f64(&a)?;
     let t = [s[0][3], s[1][3], s[2][3]];
     let mut m = [[0.0; 4]; 3];
     for r in 0..3 {
-        m[r] = [inv[r][0], inv[r][1], inv[r][2], -(inv[r][0] * t[0] + inv[r][1] * t[1] + inv[r][2] * t[2])];
+        m[r] = [
+            inv[r][0],
+            inv[r][1],
+            inv[r][2],
+            -(inv[r][0] * t[0] + inv[r][1] * t[1] + inv[r][2] * t[2]),
+        ];
     }
     Similarity::from_affine(&m)
 }

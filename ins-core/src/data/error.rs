@@ -70,29 +70,47 @@ pub enum DataError {
 
 impl DataError {
     pub(crate) fn missing(path: &Path, what: impl Into<String>) -> Self {
-        DataError::Missing { path: path.to_path_buf(), what: what.into() }
+        DataError::Missing {
+            path: path.to_path_buf(),
+            what: what.into(),
+        }
     }
 
     pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
         if source.kind() == std::io::ErrorKind::NotFound {
             return DataError::missing(path, "file not found");
         }
-        DataError::Io { path: path.to_path_buf(), source }
+        DataError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     }
 
     pub(crate) fn json(path: &Path, msg: impl Into<String>) -> Self {
-        DataError::Json { path: path.to_path_buf(), msg: msg.into() }
+        DataError::Json {
+            path: path.to_path_buf(),
+            msg: msg.into(),
+        }
     }
 
     pub(crate) fn npy(path: &Path, msg: impl Into<String>) -> Self {
-        DataError::Npy { path: path.to_path_buf(), msg: msg.into() }
+        DataError::Npy {
+            path: path.to_path_buf(),
+            msg: msg.into(),
+        }
     }
 
     pub(crate) fn image(path: &Path, msg: impl Into<String>) -> Self {
-        DataError::Image { path: path.to_path_buf(), msg: msg.into() }
+        DataError::Image {
+            path: path.to_path_buf(),
+            msg: msg.into(),
+        }
     }
 
     pub(crate) fn invalid(path: &Path, msg: impl Into<String>) -> Self {
-        DataError::Invalid { path: path.to_path_buf(), msg: msg.into() }
+        DataError::Invalid {
+            path: path.to_path_buf(),
+            msg: msg.into(),
+        }
     }
 }

@@ -34,13 +34,21 @@ pub struct Mask {
 impl Image {
     /// An image from f32 RGB values (`h·w·3`, clamped to `[0, 1]`, rounded).
     pub fn from_f32(width: u32, height: u32, rgb: &[f32]) -> Image {
-        Image { width, height, data: rgb.iter().map(|&v| to_u8(v)).collect() }
+        Image {
+            width,
+            height,
+            data: rgb.iter().map(|&v| to_u8(v)).collect(),
+        }
     }
 
     /// Colour of pixel `(x, y)` in `[0, 1]`.
     pub fn rgb(&self, x: u32, y: u32) -> [f32; 3] {
         let i = (y as usize * self.width as usize + x as usize) * 3;
-        [self.data[i] as f32 / 255.0, self.data[i + 1] as f32 / 255.0, self.data[i + 2] as f32 / 255.0]
+        [
+            self.data[i] as f32 / 255.0,
+            self.data[i + 1] as f32 / 255.0,
+            self.data[i + 2] as f32 / 255.0,
+        ]
     }
 
     /// All pixels as f32 in `[0, 1]`, `h·w·3` row major.
@@ -62,17 +70,37 @@ impl Image {
     pub fn resized(&self, width: u32, height: u32) -> Image {
         match ::image::RgbImage::from_raw(self.width, self.height, self.data.clone()) {
             Some(buf) => {
-                let out = ::image::imageops::resize(&buf, width, height, ::image::imageops::FilterType::Triangle);
-                Image { width, height, data: out.into_raw() }
+                let out = ::image::imageops::resize(
+                    &buf,
+                    width,
+                    height,
+                    ::image::imageops::FilterType::Triangle,
+                );
+                Image {
+                    width,
+                    height,
+                    data: out.into_raw(),
+                }
             }
-            None => Image { width, height, data: vec![0; width as usize * height as usize * 3] },
+            None => Image {
+                width,
+                height,
+                data: vec![0; width as usize * height as usize * 3],
+            },
         }
     }
 
     /// Writes a PNG.
     pub fn save_png(&self, path: &Path) -> Result<(), DataError> {
-        ::image::save_buffer_with_format(path, &self.data, self.width, self.height, ::image::ExtendedColorType::Rgb8, ::image::ImageFormat::Png)
-            .map_err(|e| DataError::image(path, e.to_string()))
+        ::image::save_buffer_with_format(
+            path,
+            &self.data,
+            self.width,
+            self.height,
+            ::image::ExtendedColorType::Rgb8,
+            ::image::ImageFormat::Png,
+        )
+        .map_err(|e| DataError::image(path, e.to_string()))
     }
 }
 
@@ -162,8 +190,12 @@ impl Decoded {
 /// Decodes an image file (PNG or JPEG; format sniffed from the content), keeping alpha.
 pub fn read_image(path: &Path) -> Result<Decoded, DataError> {
     let reader = ::image::ImageReader::open(path).map_err(|e| DataError::io(path, e))?;
-    let reader = reader.with_guessed_format().map_err(|e| DataError::io(path, e))?;
-    let img = reader.decode().map_err(|e| DataError::image(path, e.to_string()))?;
+    let reader = reader
+        .with_guessed_format()
+        .map_err(|e| DataError::io(path, e))?;
+    let img = reader
+        .decode()
+        .map_err(|e| DataError::image(path, e.to_string()))?;
     let (w, h) = (img.width(), img.height());
     if img.color().has_alpha() {
         let rgba = img.into_rgba8().into_raw();
@@ -173,28 +205,65 @@ pub fn read_image(path: &Path) -> Result<Decoded, DataError> {
             rgb.extend_from_slice(&px[..3]);
             alpha.push(px[3]);
         }
-        Ok(Decoded { image: Image { width: w, height: h, data: rgb }, alpha: Some(Mask { width: w, height: h, data: alpha }) })
+        Ok(Decoded {
+            image: Image {
+                width: w,
+                height: h,
+                data: rgb,
+            },
+            alpha: Some(Mask {
+                width: w,
+                height: h,
+                data: alpha,
+            }),
+        })
     } else {
-        Ok(Decoded { image: Image { width: w, height: h, data: img.into_rgb8().into_raw() }, alpha: None })
+        Ok(Decoded {
+            image: Image {
+                width: w,
+                height: h,
+                data: img.into_rgb8().into_raw(),
+            },
+            alpha: None,
+        })
     }
 }
 
 /// Decodes a mask file: its grey level (0/255 masks stay 0/255).
 pub fn read_mask(path: &Path) -> Result<Mask, DataError> {
     let reader = ::image::ImageReader::open(path).map_err(|e| DataError::io(path, e))?;
-    let reader = reader.with_guessed_format().map_err(|e| DataError::io(path, e))?;
-    let img = reader.decode().map_err(|e| DataError::image(path, e.to_string()))?;
+    let reader = reader
+        .with_guessed_format()
+        .map_err(|e| DataError::io(path, e))?;
+    let img = reader
+        .decode()
+        .map_err(|e| DataError::image(path, e.to_string()))?;
     let (w, h) = (img.width(), img.height());
-    Ok(Mask { width: w, height: h, data: img.into_luma8().into_raw() })
+    Ok(Mask {
+        width: w,
+        height: h,
+        data: img.into_luma8().into_raw(),
+    })
 }
 
 /// Writes an 8-bit PNG with 1, 3 or 4 channels.
-pub fn write_png(path: &Path, width: u32, height: u32, channels: usize, data: &[u8]) -> Result<(), DataError> {
+pub fn write_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    channels: usize,
+    data: &[u8],
+) -> Result<(), DataError> {
     let ct = match channels {
         1 => ::image::ExtendedColorType::L8,
         3 => ::image::ExtendedColorType::Rgb8,
         4 => ::image::ExtendedColorType::Rgba8,
-        _ => return Err(DataError::image(path, format!("cannot write {channels} channels"))),
+        _ => {
+            return Err(DataError::image(
+                path,
+                format!("cannot write {channels} channels"),
+            ));
+        }
     };
     ::image::save_buffer_with_format(path, data, width, height, ct, ::image::ImageFormat::Png)
         .map_err(|e| DataError::image(path, e.to_string()))
@@ -206,7 +275,10 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>, DataError> {
     let mut files = Vec::new();
     for e in entries {
         let p = e.map_err(|e| DataError::io(dir, e))?.path();
-        let ext = p.extension().and_then(|s| s.to_str()).map(|s| s.to_ascii_lowercase());
+        let ext = p
+            .extension()
+            .and_then(|s| s.to_str())
+            .map(|s| s.to_ascii_lowercase());
         if p.is_file() && matches!(ext.as_deref(), Some("png" | "jpg" | "jpeg")) {
             files.push(p);
         }
@@ -222,9 +294,13 @@ pub fn parallel_map<T: Send>(
     paths: &[PathBuf],
     f: impl Fn(&Path) -> Result<T, DataError> + Sync,
 ) -> Result<Vec<T>, DataError> {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(paths.len()).max(1);
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(paths.len())
+        .max(1);
     let next = AtomicUsize::new(0);
-    let slots: Vec<Mutex<Option<Result<T, DataError>>>> = paths.iter().map(|_| Mutex::new(None)).collect();
+    let slots: Vec<Mutex<Option<Result<T, DataError>>>> =
+        paths.iter().map(|_| Mutex::new(None)).collect();
     std::thread::scope(|s| {
         for _ in 0..threads {
             s.spawn(|| {
@@ -253,7 +329,10 @@ pub fn parallel_map<T: Send>(
             Some(Err(e)) => return Err(e),
             None => {
                 // Skipped after an earlier failure at a later index: find and report that one.
-                return Err(DataError::invalid(&paths[i], "not read: loading stopped after an error in another file"));
+                return Err(DataError::invalid(
+                    &paths[i],
+                    "not read: loading stopped after an error in another file",
+                ));
             }
         }
     }

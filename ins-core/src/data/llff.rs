@@ -24,7 +24,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     }
     let arr = read_npy(&npy_path)?;
     if arr.shape.len() != 2 || arr.shape[1] != 17 || arr.shape[0] == 0 {
-        return Err(DataError::npy(&npy_path, format!("shape {:?}, expected (N, 17) with N > 0", arr.shape)));
+        return Err(DataError::npy(
+            &npy_path,
+            format!("shape {:?}, expected (N, 17) with N > 0", arr.shape),
+        ));
     }
     if arr.data.iter().any(|v| !v.is_finite()) {
         return Err(DataError::npy(&npy_path, "contains NaN or infinite values"));
@@ -35,19 +38,32 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     if files.len() != n {
         return Err(DataError::invalid(
             &img_dir,
-            format!("{} images but {} has {n} rows: counts do not match", files.len(), npy_path.display()),
+            format!(
+                "{} images but {} has {n} rows: counts do not match",
+                files.len(),
+                npy_path.display()
+            ),
         ));
     }
     let images = parallel_map(&files, |p| {
         let (img, _) = read_image(p)?.composite_on_white();
-        Ok(if extra > 1 { img.downscaled(extra) } else { img })
+        Ok(if extra > 1 {
+            img.downscaled(extra)
+        } else {
+            img
+        })
     })?;
     let (w, h) = (images[0].width, images[0].height);
     for (img, p) in images.iter().zip(&files) {
         if (img.width, img.height) != (w, h) {
             return Err(DataError::invalid(
                 p,
-                format!("image is {}×{} but {} is {w}×{h}: mixed image sizes", img.width, img.height, files[0].display()),
+                format!(
+                    "image is {}×{} but {} is {w}×{h}: mixed image sizes",
+                    img.width,
+                    img.height,
+                    files[0].display()
+                ),
             ));
         }
     }
@@ -68,14 +84,20 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     }
     for (i, &(hh, ww, f)) in hwf.iter().enumerate() {
         if !(hh > 0.0 && ww > 0.0 && f > 0.0) {
-            return Err(DataError::npy(&npy_path, format!("row {i}: H, W, focal = {hh}, {ww}, {f} must be positive")));
+            return Err(DataError::npy(
+                &npy_path,
+                format!("row {i}: H, W, focal = {hh}, {ww}, {f} must be positive"),
+            ));
         }
     }
     let min_bd = bds.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
     let max_bd = bds.iter().map(|b| b.1).fold(f64::NEG_INFINITY, f64::max);
     // All values are finite (checked above), so plain comparisons suffice.
     if min_bd <= 0.0 || max_bd < min_bd {
-        return Err(DataError::npy(&npy_path, format!("depth bounds [{min_bd}, {max_bd}] are not positive and ordered")));
+        return Err(DataError::npy(
+            &npy_path,
+            format!("depth bounds [{min_bd}, {max_bd}] are not positive and ordered"),
+        ));
     }
     let sc = 1.0 / (min_bd * opts.bd_factor as f64);
     for p in poses.iter_mut() {
@@ -84,7 +106,11 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         }
     }
     let avg = average_pose(&poses);
-    let rot_t = [[avg[0][0], avg[1][0], avg[2][0]], [avg[0][1], avg[1][1], avg[2][1]], [avg[0][2], avg[1][2], avg[2][2]]];
+    let rot_t = [
+        [avg[0][0], avg[1][0], avg[2][0]],
+        [avg[0][1], avg[1][1], avg[2][1]],
+        [avg[0][2], avg[1][2], avg[2][2]],
+    ];
     let c = [avg[0][3], avg[1][3], avg[2][3]];
     let recentre = |p: &[[f64; 4]; 3]| -> [[f32; 4]; 3] {
         let mut out = [[0.0f32; 4]; 3];
@@ -110,16 +136,29 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
             recentre(&poses[i]),
         );
         let depth_range = Some(((bds[i].0 * sc) as f32, (bds[i].1 * sc) as f32));
-        views.push(View { camera, image, mask: None, path, mask_path: None, depth_range });
+        views.push(View {
+            camera,
+            image,
+            mask: None,
+            path,
+            mask_path: None,
+            depth_range,
+        });
     }
     let hold = opts.llff_hold;
-    let test: Vec<usize> = if hold > 0 { (0..n).step_by(hold).collect() } else { Vec::new() };
+    let test: Vec<usize> = if hold > 0 {
+        (0..n).step_by(hold).collect()
+    } else {
+        Vec::new()
+    };
     let train: Vec<usize> = (0..n).filter(|i| !test.contains(i)).collect();
     let bounds = frustum_bounds(&views);
     let to_scene = Similarity {
         scale: sc as f32,
         rotation: rot_t.map(|r| r.map(|v| v as f32)),
-        translation: std::array::from_fn(|r| -(0..3).map(|k| rot_t[r][k] * c[k]).sum::<f64>() as f32),
+        translation: std::array::from_fn(|r| {
+            -(0..3).map(|k| rot_t[r][k] * c[k]).sum::<f64>() as f32
+        }),
     };
     Ok(Scene {
         name: super::folder_name(dir),
@@ -150,7 +189,10 @@ fn image_folder(dir: &Path, factor: u32) -> Result<(PathBuf, u32), DataError> {
         if full.is_dir() {
             return Ok((full, factor));
         }
-        return Err(DataError::missing(&exact, format!("image folder (and no {} to downscale)", full.display())));
+        return Err(DataError::missing(
+            &exact,
+            format!("image folder (and no {} to downscale)", full.display()),
+        ));
     }
     if full.is_dir() {
         return Ok((full, 1));
@@ -159,7 +201,9 @@ fn image_folder(dir: &Path, factor: u32) -> Result<(PathBuf, u32), DataError> {
     if let Ok(entries) = std::fs::read_dir(dir) {
         for e in entries.flatten() {
             let name = e.file_name().to_string_lossy().to_string();
-            if let Some(k) = name.strip_prefix("images_").and_then(|k| k.parse::<u32>().ok())
+            if let Some(k) = name
+                .strip_prefix("images_")
+                .and_then(|k| k.parse::<u32>().ok())
                 && e.path().is_dir()
                 && best.as_ref().is_none_or(|b| k < b.0)
             {
@@ -167,7 +211,8 @@ fn image_folder(dir: &Path, factor: u32) -> Result<(PathBuf, u32), DataError> {
             }
         }
     }
-    best.map(|(_, p)| (p, 1)).ok_or_else(|| DataError::missing(&full, "image folder (images/ or images_N/)"))
+    best.map(|(_, p)| (p, 1))
+        .ok_or_else(|| DataError::missing(&full, "image folder (images/ or images_N/)"))
 }
 
 /// NeRF's `poses_avg`: mean centre, summed back and up axes, re-orthonormalized.
@@ -199,7 +244,11 @@ fn normalize64(v: [f64; 3]) -> [f64; 3] {
 }
 
 fn cross64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// Box around every view's frustum between its near and far depth bounds: the region the
@@ -211,11 +260,19 @@ fn frustum_bounds(views: &[View]) -> Bounds {
         let c = &v.camera;
         let (near, far) = v.depth_range.unwrap_or((1.0, 1.0));
         for depth in [near, far] {
-            for (x, y) in [(0.0, 0.0), (c.width as f32, 0.0), (0.0, c.height as f32), (c.width as f32, c.height as f32)] {
+            for (x, y) in [
+                (0.0, 0.0),
+                (c.width as f32, 0.0),
+                (0.0, c.height as f32),
+                (c.width as f32, c.height as f32),
+            ] {
                 let d = c.direction_camera(x, y);
                 let rot = c.rotation();
                 let w = crate::render::geometry::mat3_mul_vec(&rot, d);
-                let p = crate::render::geometry::add(c.origin(), crate::render::geometry::scale(w, depth));
+                let p = crate::render::geometry::add(
+                    c.origin(),
+                    crate::render::geometry::scale(w, depth),
+                );
                 for k in 0..3 {
                     min[k] = min[k].min(p[k]);
                     max[k] = max[k].max(p[k]);

@@ -30,7 +30,14 @@ pub fn detect_format(dir: &Path) -> Result<SceneFormat, DataError> {
     if !dir.is_dir() {
         return Err(DataError::missing(dir, "scene folder"));
     }
-    if ["transforms_train.json", "transforms_val.json", "transforms_test.json"].iter().any(|f| dir.join(f).is_file()) {
+    if [
+        "transforms_train.json",
+        "transforms_val.json",
+        "transforms_test.json",
+    ]
+    .iter()
+    .any(|f| dir.join(f).is_file())
+    {
         return Ok(SceneFormat::Blender);
     }
     if dir.join("poses_bounds.npy").is_file() {
@@ -41,7 +48,9 @@ pub fn detect_format(dir: &Path) -> Result<SceneFormat, DataError> {
     }
     Err(DataError::UnknownFormat {
         path: dir.to_path_buf(),
-        msg: "expected transforms_train.json (Blender), poses_bounds.npy (LLFF) or cameras.npz (DTU)".into(),
+        msg:
+            "expected transforms_train.json (Blender), poses_bounds.npy (LLFF) or cameras.npz (DTU)"
+                .into(),
     })
 }
 
@@ -52,9 +61,15 @@ impl Scene {
     }
 
     /// Reads the scene in `dir` as the given format.
-    pub fn load_as(format: SceneFormat, dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
+    pub fn load_as(
+        format: SceneFormat,
+        dir: &Path,
+        opts: &LoadOptions,
+    ) -> Result<Scene, DataError> {
         if opts.downscale == 0 {
-            return Err(DataError::Request("downscale factor must be at least 1".into()));
+            return Err(DataError::Request(
+                "downscale factor must be at least 1".into(),
+            ));
         }
         match format {
             SceneFormat::Blender => blender::load(dir, opts),
@@ -67,5 +82,7 @@ impl Scene {
 /// Last component of a folder path, for naming a scene.
 pub(crate) fn folder_name(dir: &Path) -> String {
     let canonical = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
-    canonical.file_name().map_or_else(|| "scene".to_string(), |n| n.to_string_lossy().into_owned())
+    canonical
+        .file_name()
+        .map_or_else(|| "scene".to_string(), |n| n.to_string_lossy().into_owned())
 }

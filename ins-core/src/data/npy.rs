@@ -40,12 +40,19 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>, DataError> {
         .map_err(|e| DataError::npy(path, format!("not a zip archive: {e}")))?;
     let mut out = BTreeMap::new();
     for i in 0..zip.len() {
-        let mut entry = zip.by_index(i).map_err(|e| DataError::npy(path, format!("entry {i}: {e}")))?;
+        let mut entry = zip
+            .by_index(i)
+            .map_err(|e| DataError::npy(path, format!("entry {i}: {e}")))?;
         let name = entry.name().to_string();
-        let Some(stem) = name.strip_suffix(".npy") else { continue };
+        let Some(stem) = name.strip_suffix(".npy") else {
+            continue;
+        };
         let mut bytes = Vec::new();
-        entry.read_to_end(&mut bytes).map_err(|e| DataError::npy(path, format!("{name}: {e}")))?;
-        let arr = parse_npy(&bytes).map_err(|msg| DataError::npy(path, format!("{name}: {msg}")))?;
+        entry
+            .read_to_end(&mut bytes)
+            .map_err(|e| DataError::npy(path, format!("{name}: {e}")))?;
+        let arr =
+            parse_npy(&bytes).map_err(|msg| DataError::npy(path, format!("{name}: {msg}")))?;
         out.insert(stem.to_string(), arr);
     }
     Ok(out)
@@ -56,24 +63,38 @@ fn parse_npy(bytes: &[u8]) -> Result<Array, String> {
     let npy = npyz::NpyFile::new(bytes).map_err(|e| format!("bad header: {e}"))?;
     let shape: Vec<usize> = npy.shape().iter().map(|&d| d as usize).collect();
     let (len, size) = match npy.dtype() {
-        npyz::DType::Plain(ts) if ts.type_char() == TypeChar::Float && matches!(ts.size_field(), 4 | 8) => {
+        npyz::DType::Plain(ts)
+            if ts.type_char() == TypeChar::Float && matches!(ts.size_field(), 4 | 8) =>
+        {
             (npy.len() as usize, ts.size_field() as usize)
         }
         other => return Err(format!("dtype {} is not float32 or float64", other.descr())),
     };
     if len.checked_mul(size).is_none_or(|n| n > bytes.len()) {
-        return Err(format!("shape {shape:?} needs {len} values but the file is only {} bytes", bytes.len()));
+        return Err(format!(
+            "shape {shape:?} needs {len} values but the file is only {} bytes",
+            bytes.len()
+        ));
     }
     let fortran = npy.order() == npyz::Order::Fortran;
     let data: Vec<f64> = if size == 8 {
-        npy.into_vec::<f64>().map_err(|e| format!("truncated data: {e}"))?
+        npy.into_vec::<f64>()
+            .map_err(|e| format!("truncated data: {e}"))?
     } else {
-        npy.into_vec::<f32>().map_err(|e| format!("truncated data: {e}"))?.into_iter().map(f64::from).collect()
+        npy.into_vec::<f32>()
+            .map_err(|e| format!("truncated data: {e}"))?
+            .into_iter()
+            .map(f64::from)
+            .collect()
     };
     if data.len() != len {
         return Err(format!("expected {len} values, read {}", data.len()));
     }
-    let data = if fortran && shape.len() > 1 { fortran_to_c(&data, &shape) } else { data };
+    let data = if fortran && shape.len() > 1 {
+        fortran_to_c(&data, &shape)
+    } else {
+        data
+    };
     Ok(Array { shape, data })
 }
 
@@ -109,7 +130,8 @@ pub fn write_npy(path: &Path, shape: &[usize], data: &[f64]) -> Result<(), DataE
         .writer(std::io::BufWriter::new(file))
         .begin_nd()
         .map_err(|e| DataError::io(path, e))?;
-    w.extend(data.iter().copied()).map_err(|e| DataError::io(path, e))?;
+    w.extend(data.iter().copied())
+        .map_err(|e| DataError::io(path, e))?;
     w.finish().map_err(|e| DataError::io(path, e))
 }
 
@@ -118,7 +140,8 @@ pub fn write_npz(path: &Path, arrays: &[(String, Vec<usize>, Vec<f64>)]) -> Resu
     let mut npz = npyz::npz::NpzWriter::create(path).map_err(|e| DataError::io(path, e))?;
     for (name, shape, data) in arrays {
         let shape64: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
-        let opts = npyz::zip::write::FileOptions::default().compression_method(npyz::zip::CompressionMethod::Stored);
+        let opts = npyz::zip::write::FileOptions::default()
+            .compression_method(npyz::zip::CompressionMethod::Stored);
         let mut w = npz
             .array::<f64>(name, opts)
             .map_err(|e| DataError::io(path, e))?
@@ -126,8 +149,13 @@ pub fn write_npz(path: &Path, arrays: &[(String, Vec<usize>, Vec<f64>)]) -> Resu
             .shape(&shape64)
             .begin_nd()
             .map_err(|e| DataError::io(path, e))?;
-        w.extend(data.iter().copied()).map_err(|e| DataError::io(path, e))?;
+        w.extend(data.iter().copied())
+            .map_err(|e| DataError::io(path, e))?;
         w.finish().map_err(|e| DataError::io(path, e))?;
     }
-    npz.zip_writer().finish().map_err(|e| DataError::io(path, std::io::Error::other(e)))?.flush().map_err(|e| DataError::io(path, e))
+    npz.zip_writer()
+        .finish()
+        .map_err(|e| DataError::io(path, std::io::Error::other(e)))?
+        .flush()
+        .map_err(|e| DataError::io(path, e))
 }

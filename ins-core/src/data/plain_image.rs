@@ -13,7 +13,10 @@ pub fn load_rgb(path: &Path, size: Option<(u32, u32)>) -> Result<Image, DataErro
     Ok(match size {
         Some((w, h)) if (w, h) != (img.width, img.height) => {
             if w == 0 || h == 0 {
-                return Err(DataError::Request(format!("cannot resize {} to {w}×{h}", path.display())));
+                return Err(DataError::Request(format!(
+                    "cannot resize {} to {w}×{h}",
+                    path.display()
+                )));
             }
             img.resized(w, h)
         }
@@ -41,7 +44,10 @@ pub fn pixel_coordinates(width: u32, height: u32) -> Vec<[f32; 2]> {
     let mut out = Vec::with_capacity(width as usize * height as usize);
     for v in 0..height {
         for u in 0..width {
-            out.push([2.0 * (u as f32 + 0.5) / width as f32 - 1.0, 2.0 * (v as f32 + 0.5) / height as f32 - 1.0]);
+            out.push([
+                2.0 * (u as f32 + 0.5) / width as f32 - 1.0,
+                2.0 * (v as f32 + 0.5) / height as f32 - 1.0,
+            ]);
         }
     }
     out

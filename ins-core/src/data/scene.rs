@@ -40,7 +40,9 @@ impl FromStr for SceneFormat {
             "blender" | "nerf_synthetic" | "synthetic" => Ok(SceneFormat::Blender),
             "llff" => Ok(SceneFormat::Llff),
             "dtu" | "idr" | "neus" => Ok(SceneFormat::Dtu),
-            _ => Err(format!("unknown scene format {s:?} (expected blender, llff or dtu)")),
+            _ => Err(format!(
+                "unknown scene format {s:?} (expected blender, llff or dtu)"
+            )),
         }
     }
 }
@@ -120,7 +122,12 @@ pub struct LoadOptions {
 
 impl Default for LoadOptions {
     fn default() -> Self {
-        LoadOptions { downscale: 1, splits: None, llff_hold: 8, bd_factor: 0.75 }
+        LoadOptions {
+            downscale: 1,
+            splits: None,
+            llff_hold: 8,
+            bd_factor: 0.75,
+        }
     }
 }
 
@@ -198,7 +205,9 @@ impl Scene {
 
     /// Size `(width, height)` of the first view, `(0, 0)` without views.
     pub fn resolution(&self) -> (u32, u32) {
-        self.views.first().map_or((0, 0), |v| (v.camera.width, v.camera.height))
+        self.views
+            .first()
+            .map_or((0, 0), |v| (v.camera.width, v.camera.height))
     }
 
     /// Whether any view has a mask.

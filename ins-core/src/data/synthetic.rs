@@ -119,7 +119,9 @@ impl Rendering {
             return false;
         }
         let i = (y * self.width + x) as usize;
-        let Some(o) = self.object[i] else { return false };
+        let Some(o) = self.object[i] else {
+            return false;
+        };
         if !self.mask[i] {
             return false;
         }
@@ -143,29 +145,56 @@ impl AnalyticScene {
         let white = [0.95, 0.95, 0.9];
         let mut objects = vec![
             Object {
-                shape: Shape::Sphere { center: [0.0, 0.0, 0.0], radius: 0.45 },
-                texture: Texture::Checker { a: red, b: white, size: 0.15 },
+                shape: Shape::Sphere {
+                    center: [0.0, 0.0, 0.0],
+                    radius: 0.45,
+                },
+                texture: Texture::Checker {
+                    a: red,
+                    b: white,
+                    size: 0.15,
+                },
                 foreground: true,
             },
             Object {
-                shape: Shape::Box { min: [0.25, 0.15, -0.55], max: [0.6, 0.5, -0.2] },
-                texture: Texture::Checker { a: [0.1, 0.6, 0.2], b: [0.9, 0.8, 0.2], size: 0.1 },
+                shape: Shape::Box {
+                    min: [0.25, 0.15, -0.55],
+                    max: [0.6, 0.5, -0.2],
+                },
+                texture: Texture::Checker {
+                    a: [0.1, 0.6, 0.2],
+                    b: [0.9, 0.8, 0.2],
+                    size: 0.1,
+                },
                 foreground: true,
             },
             Object {
-                shape: Shape::Sphere { center: [-0.45, 0.35, -0.3], radius: 0.2 },
+                shape: Shape::Sphere {
+                    center: [-0.45, 0.35, -0.3],
+                    radius: 0.2,
+                },
                 texture: Texture::Solid([0.15, 0.3, 0.9]),
                 foreground: true,
             },
         ];
         if ground {
             objects.push(Object {
-                shape: Shape::Plane { point: [0.0, 0.0, -0.55], normal: [0.0, 0.0, 1.0] },
-                texture: Texture::Checker { a: [0.35, 0.3, 0.25], b: [0.6, 0.55, 0.5], size: 0.25 },
+                shape: Shape::Plane {
+                    point: [0.0, 0.0, -0.55],
+                    normal: [0.0, 0.0, 1.0],
+                },
+                texture: Texture::Checker {
+                    a: [0.35, 0.3, 0.25],
+                    b: [0.6, 0.55, 0.5],
+                    size: 0.25,
+                },
                 foreground: false,
             });
         }
-        AnalyticScene { objects, to_world: Similarity::identity() }
+        AnalyticScene {
+            objects,
+            to_world: Similarity::identity(),
+        }
     }
 
     /// A forward-facing arrangement for LLFF: objects 3–6 units down −z (local), a ground plane
@@ -173,32 +202,66 @@ impl AnalyticScene {
     pub fn forward_facing() -> Self {
         let objects = vec![
             Object {
-                shape: Shape::Sphere { center: [0.0, 0.0, -4.0], radius: 0.8 },
-                texture: Texture::Checker { a: [0.85, 0.2, 0.15], b: [0.95, 0.95, 0.9], size: 0.25 },
+                shape: Shape::Sphere {
+                    center: [0.0, 0.0, -4.0],
+                    radius: 0.8,
+                },
+                texture: Texture::Checker {
+                    a: [0.85, 0.2, 0.15],
+                    b: [0.95, 0.95, 0.9],
+                    size: 0.25,
+                },
                 foreground: true,
             },
             Object {
-                shape: Shape::Box { min: [-1.8, -1.5, -5.5], max: [-0.8, 0.2, -4.5] },
-                texture: Texture::Checker { a: [0.1, 0.6, 0.2], b: [0.9, 0.8, 0.2], size: 0.3 },
+                shape: Shape::Box {
+                    min: [-1.8, -1.5, -5.5],
+                    max: [-0.8, 0.2, -4.5],
+                },
+                texture: Texture::Checker {
+                    a: [0.1, 0.6, 0.2],
+                    b: [0.9, 0.8, 0.2],
+                    size: 0.3,
+                },
                 foreground: true,
             },
             Object {
-                shape: Shape::Sphere { center: [1.3, 0.6, -3.2], radius: 0.5 },
+                shape: Shape::Sphere {
+                    center: [1.3, 0.6, -3.2],
+                    radius: 0.5,
+                },
                 texture: Texture::Solid([0.15, 0.3, 0.9]),
                 foreground: true,
             },
             Object {
-                shape: Shape::Plane { point: [0.0, -1.5, 0.0], normal: [0.0, 1.0, 0.0] },
-                texture: Texture::Checker { a: [0.35, 0.3, 0.25], b: [0.6, 0.55, 0.5], size: 0.5 },
+                shape: Shape::Plane {
+                    point: [0.0, -1.5, 0.0],
+                    normal: [0.0, 1.0, 0.0],
+                },
+                texture: Texture::Checker {
+                    a: [0.35, 0.3, 0.25],
+                    b: [0.6, 0.55, 0.5],
+                    size: 0.5,
+                },
                 foreground: false,
             },
             Object {
-                shape: Shape::Plane { point: [0.0, 0.0, -8.0], normal: [0.0, 0.0, 1.0] },
-                texture: Texture::Checker { a: [0.5, 0.6, 0.8], b: [0.8, 0.85, 0.95], size: 0.7 },
+                shape: Shape::Plane {
+                    point: [0.0, 0.0, -8.0],
+                    normal: [0.0, 0.0, 1.0],
+                },
+                texture: Texture::Checker {
+                    a: [0.5, 0.6, 0.8],
+                    b: [0.8, 0.85, 0.95],
+                    size: 0.7,
+                },
                 foreground: false,
             },
         ];
-        AnalyticScene { objects, to_world: Similarity::identity() }
+        AnalyticScene {
+            objects,
+            to_world: Similarity::identity(),
+        }
     }
 
     /// First hit of the world ray `o + t·d` (unit `d`, `t > 0`).
@@ -227,7 +290,12 @@ impl AnalyticScene {
                 if (k as i64).rem_euclid(2) == 0 { a } else { b }
             }
         };
-        Some(Hit { t: tl * s.scale, point: s.apply_point(pl), object: i, rgb: scale(base, shade) })
+        Some(Hit {
+            t: tl * s.scale,
+            point: s.apply_point(pl),
+            object: i,
+            rgb: scale(base, shade),
+        })
     }
 
     /// Ray-casts the scene through every pixel centre of `camera`.
@@ -271,7 +339,9 @@ fn intersect(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f32, Vec3)> {
             }
             let s = disc.sqrt();
             let a = dot(d, d);
-            let t = [(-b - s) / a, (-b + s) / a].into_iter().find(|&t| t > EPS)?;
+            let t = [(-b - s) / a, (-b + s) / a]
+                .into_iter()
+                .find(|&t| t > EPS)?;
             Some((t, normalize(sub(add(o, scale(d, t)), center))))
         }
         Shape::Box { min, max } => {
@@ -330,7 +400,10 @@ pub struct SynthOptions {
 
 impl Default for SynthOptions {
     fn default() -> Self {
-        SynthOptions { size: 64, views: 10 }
+        SynthOptions {
+            size: 64,
+            views: 10,
+        }
     }
 }
 
@@ -365,7 +438,11 @@ pub struct SynthScene {
 }
 
 /// Writes a small analytic scene in `format` into `dir` (created if needed).
-pub fn write(format: SceneFormat, dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataError> {
+pub fn write(
+    format: SceneFormat,
+    dir: &Path,
+    opts: &SynthOptions,
+) -> Result<SynthScene, DataError> {
     match format {
         SceneFormat::Blender => write_blender(dir, opts),
         SceneFormat::Llff => write_llff(dir, opts),
@@ -414,7 +491,11 @@ pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, Data
     let fov = 0.691_111_2f32;
     let n_other = (opts.views / 4).max(1);
     let mut views = Vec::new();
-    for (split, count, phase) in [(Split::Train, opts.views.max(1), 0.0f32), (Split::Val, n_other, 0.37), (Split::Test, n_other, 0.71)] {
+    for (split, count, phase) in [
+        (Split::Train, opts.views.max(1), 0.0f32),
+        (Split::Val, n_other, 0.37),
+        (Split::Test, n_other, 0.71),
+    ] {
         let sub_dir = dir.join(split.to_string());
         create_dir(&sub_dir)?;
         let mut frames = Vec::new();
@@ -422,7 +503,12 @@ pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, Data
             let az = (i as f32 + phase) * 2.399_963 + phase;
             let el = (10.0 + 50.0 * ((i as f32 + 0.5 + phase) / count as f32).fract()).to_radians();
             let eye = scale([el.cos() * az.cos(), el.cos() * az.sin(), el.sin()], 4.0);
-            let camera = Camera::from_fov_x(size, size, fov, pose_look_at(eye, [0.0; 3], [0.0, 0.0, 1.0]));
+            let camera = Camera::from_fov_x(
+                size,
+                size,
+                fov,
+                pose_look_at(eye, [0.0; 3], [0.0, 0.0, 1.0]),
+            );
             let render = scene.render(&camera);
             let mut rgba = Vec::with_capacity((size * size * 4) as usize);
             for (k, &m) in render.mask.iter().enumerate() {
@@ -442,14 +528,26 @@ pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, Data
                 "transform_matrix": [c[0], c[1], c[2], [0.0, 0.0, 0.0, 1.0]],
             }));
             let depth_bounds = z_depth_bounds(&camera, &render);
-            views.push(SynthView { camera, split, image_path, render, depth_bounds });
+            views.push(SynthView {
+                camera,
+                split,
+                image_path,
+                render,
+                depth_bounds,
+            });
         }
         let path = dir.join(format!("transforms_{split}.json"));
-        let text = serde_json::to_string_pretty(&json!({ "camera_angle_x": fov, "frames": frames }))
-            .map_err(|e| DataError::json(&path, e.to_string()))?;
+        let text =
+            serde_json::to_string_pretty(&json!({ "camera_angle_x": fov, "frames": frames }))
+                .map_err(|e| DataError::json(&path, e.to_string()))?;
         std::fs::write(&path, text).map_err(|e| DataError::io(&path, e))?;
     }
-    Ok(SynthScene { format: SceneFormat::Blender, dir: dir.to_path_buf(), scene, views })
+    Ok(SynthScene {
+        format: SceneFormat::Blender,
+        dir: dir.to_path_buf(),
+        scene,
+        views,
+    })
 }
 
 /// LLFF: a grid of roughly parallel cameras looking down local −z at [`AnalyticScene::forward_facing`],
@@ -458,7 +556,11 @@ pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, Data
 /// view sees) and `images/imageNNN.png`.
 pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataError> {
     let mut scene = AnalyticScene::forward_facing();
-    scene.to_world = Similarity { scale: 2.5, rotation: axis_angle([0.3, 1.0, 0.2], 0.5), translation: [3.0, -1.0, 2.0] };
+    scene.to_world = Similarity {
+        scale: 2.5,
+        rotation: axis_angle([0.3, 1.0, 0.2], 0.5),
+        translation: [3.0, -1.0, 2.0],
+    };
     let w = opts.size.max(8);
     let h = (w * 3 / 4).max(6);
     let focal = 0.9 * w as f32;
@@ -470,14 +572,19 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
     let mut rows = Vec::with_capacity(n * 17);
     for i in 0..n {
         let (gx, gy) = ((i % cols) as f32, (i / cols) as f32);
-        let eye_l = [0.25 * gx - 0.125 * (cols as f32 - 1.0), 0.2 * gy - 0.1 * ((n / cols) as f32), 0.03 * (i % 3) as f32];
+        let eye_l = [
+            0.25 * gx - 0.125 * (cols as f32 - 1.0),
+            0.2 * gy - 0.1 * ((n / cols) as f32),
+            0.03 * (i % 3) as f32,
+        ];
         let target_l = [0.05 * (i % 2) as f32, 0.0, -5.0];
         let pose_l = pose_look_at(eye_l, target_l, [0.0, 1.0, 0.0]);
         let s = &scene.to_world;
         let rot_l = pose_l.map(|r| [r[0], r[1], r[2]]);
         let rot_w = mat3_mul(&s.rotation, &rot_l);
         let eye_w = s.apply_point(eye_l);
-        let c2w: [[f32; 4]; 3] = std::array::from_fn(|r| [rot_w[r][0], rot_w[r][1], rot_w[r][2], eye_w[r]]);
+        let c2w: [[f32; 4]; 3] =
+            std::array::from_fn(|r| [rot_w[r][0], rot_w[r][1], rot_w[r][2], eye_w[r]]);
         let camera = Camera::new(w, h, focal, focal, 0.5 * w as f32, 0.5 * h as f32, c2w);
         let render = scene.render(&camera);
         let image_path = img_dir.join(format!("image{i:03}.png"));
@@ -490,10 +597,21 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
             rows.extend([-c2w[r][1], c2w[r][0], c2w[r][2], c2w[r][3], hwf].map(f64::from));
         }
         rows.extend([depth_bounds.0 as f64, depth_bounds.1 as f64]);
-        views.push(SynthView { camera, split: Split::Train, image_path, render, depth_bounds });
+        views.push(SynthView {
+            camera,
+            split: Split::Train,
+            image_path,
+            render,
+            depth_bounds,
+        });
     }
     write_npy(&dir.join("poses_bounds.npy"), &[n, 17], &rows)?;
-    Ok(SynthScene { format: SceneFormat::Llff, dir: dir.to_path_buf(), scene, views })
+    Ok(SynthScene {
+        format: SceneFormat::Llff,
+        dir: dir.to_path_buf(),
+        scene,
+        views,
+    })
 }
 
 /// DTU / IDR: [`AnalyticScene::tabletop`] (unit-sphere frame, objects foreground, ground not)
@@ -504,10 +622,20 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
     let mut scene = AnalyticScene::tabletop(true);
     let world_scale = 30.0f32;
     let shift = [12.0f32, -3.0, 40.0];
-    scene.to_world = Similarity { scale: world_scale, rotation: Similarity::identity().rotation, translation: shift };
+    scene.to_world = Similarity {
+        scale: world_scale,
+        rotation: Similarity::identity().rotation,
+        translation: shift,
+    };
     let w = opts.size.max(8);
     let h = (w * 3 / 4).max(6);
-    let (fx, fy, cx, cy, skew) = (1.1 * w as f32, 1.12 * w as f32, 0.5 * w as f32 + 1.5, 0.5 * h as f32 - 1.0, 0.3f32);
+    let (fx, fy, cx, cy, skew) = (
+        1.1 * w as f32,
+        1.12 * w as f32,
+        0.5 * w as f32 + 1.5,
+        0.5 * h as f32 - 1.0,
+        0.3f32,
+    );
     let img_dir = dir.join("image");
     let mask_dir = dir.join("mask");
     create_dir(&img_dir)?;
@@ -522,21 +650,40 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
         let eye_l = scale([el.cos() * az.cos(), el.cos() * az.sin(), el.sin()], 2.6);
         let pose_l = pose_look_at(eye_l, [0.0, 0.0, -0.1], [0.0, 0.0, 1.0]);
         let eye_w = scene.to_world.apply_point(eye_l);
-        let c2w: [[f32; 4]; 3] = std::array::from_fn(|r| [pose_l[r][0], pose_l[r][1], pose_l[r][2], eye_w[r]]);
-        let camera = Camera { width: w, height: h, fx, fy, cx, cy, skew, c2w };
+        let c2w: [[f32; 4]; 3] =
+            std::array::from_fn(|r| [pose_l[r][0], pose_l[r][1], pose_l[r][2], eye_w[r]]);
+        let camera = Camera {
+            width: w,
+            height: h,
+            fx,
+            fy,
+            cx,
+            cy,
+            skew,
+            c2w,
+        };
         let render = scene.render(&camera);
         let image_path = img_dir.join(format!("{i:06}.png"));
         let rgb: Vec<u8> = render.rgb.iter().map(|&v| to_u8(v)).collect();
         write_png(&image_path, w, h, 3, &rgb)?;
-        let mask: Vec<u8> = render.mask.iter().flat_map(|&m| [if m { 255 } else { 0 }; 3]).collect();
+        let mask: Vec<u8> = render
+            .mask
+            .iter()
+            .flat_map(|&m| [if m { 255 } else { 0 }; 3])
+            .collect();
         write_png(&mask_dir.join(format!("{i:03}.png")), w, h, 3, &mask)?;
         // OpenCV world-to-camera: R = (c2w · diag(1, −1, −1))ᵀ, t = −R·C.
         let cv = flip_yz(&c2w);
         let r: [[f64; 3]; 3] = std::array::from_fn(|a| std::array::from_fn(|b| cv[b][a] as f64));
         let cc = [eye_w[0] as f64, eye_w[1] as f64, eye_w[2] as f64];
-        let t: [f64; 3] = std::array::from_fn(|a| -(r[a][0] * cc[0] + r[a][1] * cc[1] + r[a][2] * cc[2]));
+        let t: [f64; 3] =
+            std::array::from_fn(|a| -(r[a][0] * cc[0] + r[a][1] * cc[1] + r[a][2] * cc[2]));
         // OpenCV pixel centres are at integers, ours at +0.5.
-        let k = [[fx as f64, skew as f64, cx as f64 - 0.5], [0.0, fy as f64, cy as f64 - 0.5], [0.0, 0.0, 1.0]];
+        let k = [
+            [fx as f64, skew as f64, cx as f64 - 0.5],
+            [0.0, fy as f64, cy as f64 - 0.5],
+            [0.0, 0.0, 1.0],
+        ];
         let mut world = vec![0.0f64; 16];
         for a in 0..3 {
             for b in 0..4 {
@@ -547,13 +694,39 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
         world[15] = 1.0;
         let s = world_scale as f64;
         let scale_mat = vec![
-            s, 0.0, 0.0, shift[0] as f64, 0.0, s, 0.0, shift[1] as f64, 0.0, 0.0, s, shift[2] as f64, 0.0, 0.0, 0.0, 1.0,
+            s,
+            0.0,
+            0.0,
+            shift[0] as f64,
+            0.0,
+            s,
+            0.0,
+            shift[1] as f64,
+            0.0,
+            0.0,
+            s,
+            shift[2] as f64,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
         ];
         arrays.push((format!("world_mat_{i}"), vec![4, 4], world));
         arrays.push((format!("scale_mat_{i}"), vec![4, 4], scale_mat));
         let depth_bounds = z_depth_bounds(&camera, &render);
-        views.push(SynthView { camera, split: Split::Train, image_path, render, depth_bounds });
+        views.push(SynthView {
+            camera,
+            split: Split::Train,
+            image_path,
+            render,
+            depth_bounds,
+        });
     }
     write_npz(&dir.join("cameras.npz"), &arrays)?;
-    Ok(SynthScene { format: SceneFormat::Dtu, dir: dir.to_path_buf(), scene, views })
+    Ok(SynthScene {
+        format: SceneFormat::Dtu,
+        dir: dir.to_path_buf(),
+        scene,
+        views,
+    })
 }

@@ -26,7 +26,9 @@ impl StyleTarget {
 
     /// Stacks per-image targets into `[S, C, C]` per layer, one row per image of a batch.
     pub fn stack(targets: &[StyleTarget]) -> [Tensor<3>; 4] {
-        std::array::from_fn(|l| Tensor::cat(targets.iter().map(|t| t.grams[l].clone()).collect(), 0))
+        std::array::from_fn(|l| {
+            Tensor::cat(targets.iter().map(|t| t.grams[l].clone()).collect(), 0)
+        })
     }
 }
 
@@ -50,7 +52,10 @@ pub fn style_loss(features: &VggFeatures, targets: &[Tensor<3>; 4]) -> Tensor<1>
 pub fn style_distances(features: &VggFeatures, targets: &[Tensor<3>; 4]) -> [f32; 4] {
     std::array::from_fn(|l| {
         let g = gram(features.style_layers()[l].clone());
-        (g - targets[l].clone()).square().mean().into_scalar::<f32>()
+        (g - targets[l].clone())
+            .square()
+            .mean()
+            .into_scalar::<f32>()
     })
 }
 

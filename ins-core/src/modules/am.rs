@@ -46,7 +46,10 @@ impl AmalgamationConfig {
 impl Amalgamation {
     /// `features [N, F]`, `style [N, S]` → `[N, F]`.
     pub fn forward(&self, features: Tensor<2>, style: Tensor<2>) -> Tensor<2> {
-        let mixed = relu(self.fuse.forward(Tensor::cat(vec![features.clone(), style], 1)));
+        let mixed = relu(
+            self.fuse
+                .forward(Tensor::cat(vec![features.clone(), style], 1)),
+        );
         if !self.blend {
             return mixed;
         }

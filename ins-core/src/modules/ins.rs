@@ -63,7 +63,10 @@ impl<C: ContentModule> Ins<C> {
         } else {
             (
                 f.unsqueeze::<3>().expand([s, p, d_f]).reshape([s * p, d_f]),
-                style.reshape([s, 1, d_s]).expand([s, p, d_s]).reshape([s * p, d_s]),
+                style
+                    .reshape([s, 1, d_s])
+                    .expand([s, p, d_s])
+                    .reshape([s * p, d_s]),
             )
         };
         let h = self.am.forward(f, style);

@@ -35,20 +35,53 @@ pub struct Camera {
 
 impl Camera {
     /// A camera with principal point and focal lengths given, no skew.
-    pub fn new(width: u32, height: u32, fx: f32, fy: f32, cx: f32, cy: f32, c2w: [[f32; 4]; 3]) -> Self {
-        Camera { width, height, fx, fy, cx, cy, skew: 0.0, c2w }
+    pub fn new(
+        width: u32,
+        height: u32,
+        fx: f32,
+        fy: f32,
+        cx: f32,
+        cy: f32,
+        c2w: [[f32; 4]; 3],
+    ) -> Self {
+        Camera {
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+            skew: 0.0,
+            c2w,
+        }
     }
 
     /// A camera with horizontal field of view `fov_x` (radians), square pixels and the
     /// principal point at the image centre (the NeRF-synthetic convention).
     pub fn from_fov_x(width: u32, height: u32, fov_x: f32, c2w: [[f32; 4]; 3]) -> Self {
         let f = 0.5 * width as f32 / (0.5 * fov_x).tan();
-        Camera::new(width, height, f, f, 0.5 * width as f32, 0.5 * height as f32, c2w)
+        Camera::new(
+            width,
+            height,
+            f,
+            f,
+            0.5 * width as f32,
+            0.5 * height as f32,
+            c2w,
+        )
     }
 
     /// A camera at `eye` looking at `target`, with `up` roughly up in the image.
     pub fn look_at(width: u32, height: u32, focal: f32, eye: Vec3, target: Vec3, up: Vec3) -> Self {
-        Camera::new(width, height, focal, focal, 0.5 * width as f32, 0.5 * height as f32, pose_look_at(eye, target, up))
+        Camera::new(
+            width,
+            height,
+            focal,
+            focal,
+            0.5 * width as f32,
+            0.5 * height as f32,
+            pose_look_at(eye, target, up),
+        )
     }
 
     /// Rotation part of `c2w` (columns: right, up, back).
@@ -112,7 +145,10 @@ impl Camera {
         }
         let xn = c[0] / z;
         let yn = -c[1] / z;
-        Some([self.fx * xn + self.skew * yn + self.cx, self.fy * yn + self.cy])
+        Some([
+            self.fx * xn + self.skew * yn + self.cx,
+            self.fy * yn + self.cy,
+        ])
     }
 
     /// Whether continuous pixel position `p` lies inside the image.
@@ -157,7 +193,11 @@ pub fn pose_from_back_up(back: Vec3, up: Vec3, center: Vec3) -> [[f32; 4]; 3] {
     let z = normalize(back);
     let x = normalize(cross(up, z));
     let y = normalize(cross(z, x));
-    [[x[0], y[0], z[0], center[0]], [x[1], y[1], z[1], center[1]], [x[2], y[2], z[2], center[2]]]
+    [
+        [x[0], y[0], z[0], center[0]],
+        [x[1], y[1], z[1], center[1]],
+        [x[2], y[2], z[2], center[2]],
+    ]
 }
 
 /// `c2w` with the rotation columns multiplied by `(1, −1, −1)`: converts an OpenCV pose (x right,

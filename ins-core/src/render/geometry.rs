@@ -32,7 +32,11 @@ pub fn dot(a: Vec3, b: Vec3) -> f32 {
 
 /// Cross product.
 pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// Euclidean length.
@@ -69,7 +73,11 @@ pub fn mat3_mul(a: &Mat3, b: &Mat3) -> Mat3 {
 
 /// Transpose.
 pub fn transpose(m: &Mat3) -> Mat3 {
-    [[m[0][0], m[1][0], m[2][0]], [m[0][1], m[1][1], m[2][1]], [m[0][2], m[1][2], m[2][2]]]
+    [
+        [m[0][0], m[1][0], m[2][0]],
+        [m[0][1], m[1][1], m[2][1]],
+        [m[0][2], m[1][2], m[2][2]],
+    ]
 }
 
 /// Determinant.
@@ -86,7 +94,8 @@ pub fn inverse3(m: &Mat3) -> Option<Mat3> {
 
 /// Inverse of a 3×3 f64 matrix; `None` when singular.
 pub fn inverse3_f64(a: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let c = |r0: usize, c0: usize, r1: usize, c1: usize| a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0];
+    let c =
+        |r0: usize, c0: usize, r1: usize, c1: usize| a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0];
     let cof = [
         [c(1, 1, 2, 2), -c(1, 0, 2, 2), c(1, 0, 2, 1)],
         [-c(0, 1, 2, 2), c(0, 0, 2, 2), -c(0, 0, 2, 1)],
@@ -123,16 +132,36 @@ pub fn quat_from_mat3(m: &Mat3) -> [f32; 4] {
     let tr = m[0][0] + m[1][1] + m[2][2];
     let q = if tr > 0.0 {
         let s = (tr + 1.0).sqrt() * 2.0;
-        [0.25 * s, (m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s]
+        [
+            0.25 * s,
+            (m[2][1] - m[1][2]) / s,
+            (m[0][2] - m[2][0]) / s,
+            (m[1][0] - m[0][1]) / s,
+        ]
     } else if m[0][0] > m[1][1] && m[0][0] > m[2][2] {
         let s = (1.0 + m[0][0] - m[1][1] - m[2][2]).sqrt() * 2.0;
-        [(m[2][1] - m[1][2]) / s, 0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s]
+        [
+            (m[2][1] - m[1][2]) / s,
+            0.25 * s,
+            (m[0][1] + m[1][0]) / s,
+            (m[0][2] + m[2][0]) / s,
+        ]
     } else if m[1][1] > m[2][2] {
         let s = (1.0 + m[1][1] - m[0][0] - m[2][2]).sqrt() * 2.0;
-        [(m[0][2] - m[2][0]) / s, (m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s]
+        [
+            (m[0][2] - m[2][0]) / s,
+            (m[0][1] + m[1][0]) / s,
+            0.25 * s,
+            (m[1][2] + m[2][1]) / s,
+        ]
     } else {
         let s = (1.0 + m[2][2] - m[0][0] - m[1][1]).sqrt() * 2.0;
-        [(m[1][0] - m[0][1]) / s, (m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s]
+        [
+            (m[1][0] - m[0][1]) / s,
+            (m[0][2] + m[2][0]) / s,
+            (m[1][2] + m[2][1]) / s,
+            0.25 * s,
+        ]
     };
     let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
     q.map(|v| v / n)
@@ -142,9 +171,21 @@ pub fn quat_from_mat3(m: &Mat3) -> [f32; 4] {
 pub fn mat3_from_quat(q: [f32; 4]) -> Mat3 {
     let [w, x, y, z] = q;
     [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
     ]
 }
 
@@ -302,12 +343,19 @@ pub struct Similarity {
 impl Similarity {
     /// The identity map.
     pub fn identity() -> Self {
-        Similarity { scale: 1.0, rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], translation: [0.0; 3] }
+        Similarity {
+            scale: 1.0,
+            rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            translation: [0.0; 3],
+        }
     }
 
     /// Maps a point.
     pub fn apply_point(&self, p: Vec3) -> Vec3 {
-        add(scale(mat3_mul_vec(&self.rotation, p), self.scale), self.translation)
+        add(
+            scale(mat3_mul_vec(&self.rotation, p), self.scale),
+            self.translation,
+        )
     }
 
     /// Maps a direction (rotation only, no scale).
@@ -318,8 +366,13 @@ impl Similarity {
     /// Builds one from a 3×4 affine matrix `[A | t]` whose `A` is a scaled rotation; `None`
     /// when `A` is singular or not a similarity (tolerance 1e-3 relative).
     pub fn from_affine(m: &[[f64; 4]; 3]) -> Option<Self> {
-        let a = [[m[0][0], m[0][1], m[0][2]], [m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]];
-        let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+        let a = [
+            [m[0][0], m[0][1], m[0][2]],
+            [m[1][0], m[1][1], m[1][2]],
+            [m[2][0], m[2][1], m[2][2]],
+        ];
+        let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
             + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
         if !det.is_finite() || det <= 0.0 {
             return None;
@@ -329,6 +382,10 @@ impl Similarity {
         if orthonormality_error(&rot) > 1e-3 {
             return None;
         }
-        Some(Similarity { scale: s as f32, rotation: rot, translation: [m[0][3] as f32, m[1][3] as f32, m[2][3] as f32] })
+        Some(Similarity {
+            scale: s as f32,
+            rotation: rot,
+            translation: [m[0][3] as f32, m[1][3] as f32, m[2][3] as f32],
+        })
     }
 }

@@ -47,7 +47,12 @@ impl PatchSampler {
     /// A sampler of `size`×`size` patches with stride `stride`, seeded by `seed`, allowing 100
     /// redraws.
     pub fn new(size: u32, stride: u32, seed: u64) -> Self {
-        PatchSampler { size, stride, max_redraws: 100, rng: SmallRng::seed_from_u64(seed) }
+        PatchSampler {
+            size,
+            stride,
+            max_redraws: 100,
+            rng: SmallRng::seed_from_u64(seed),
+        }
     }
 
     /// Window side K·s in pixels.
@@ -60,10 +65,16 @@ impl PatchSampler {
     pub fn sample(&mut self, scene: &Scene, split: Split) -> Result<Patch, DataError> {
         let views = scene.split(split);
         if views.is_empty() {
-            return Err(DataError::Request(format!("split {split} of {} has no views", scene.root.display())));
+            return Err(DataError::Request(format!(
+                "split {split} of {} has no views",
+                scene.root.display()
+            )));
         }
         if self.size == 0 || self.stride == 0 {
-            return Err(DataError::Request(format!("patch size {} and stride {} must be positive", self.size, self.stride)));
+            return Err(DataError::Request(format!(
+                "patch size {} and stride {} must be positive",
+                self.size, self.stride
+            )));
         }
         let span = self.span();
         let mut redraws = 0;
@@ -91,15 +102,34 @@ impl PatchSampler {
     }
 
     /// The patch whose window starts at `(x0, y0)` in view `view`.
-    pub fn patch_at(&self, scene: &Scene, view: usize, x0: u32, y0: u32, redraws: usize) -> Result<Patch, DataError> {
+    pub fn patch_at(
+        &self,
+        scene: &Scene,
+        view: usize,
+        x0: u32,
+        y0: u32,
+        redraws: usize,
+    ) -> Result<Patch, DataError> {
         let k = self.size;
         let s = self.stride;
         let mut pixels = Vec::with_capacity((k * k) as usize);
         for j in 0..k {
             for i in 0..k {
-                pixels.push(PixelRef { view, x: x0 + i * s, y: y0 + j * s });
+                pixels.push(PixelRef {
+                    view,
+                    x: x0 + i * s,
+                    y: y0 + j * s,
+                });
             }
         }
-        Ok(Patch { batch: scene.gather(&pixels)?, view, x0, y0, size: k, stride: s, redraws })
+        Ok(Patch {
+            batch: scene.gather(&pixels)?,
+            view,
+            x0,
+            y0,
+            size: k,
+            stride: s,
+            redraws,
+        })
     }
 }

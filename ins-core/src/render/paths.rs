@@ -3,23 +3,38 @@
 
 use super::camera::{Camera, pose_from_back_up, pose_look_at};
 use super::geometry::{
-    Vec3, add, cross, dot, lerp, mat3_from_quat, mat3_mul_vec, norm, normalize, quat_from_mat3, scale, slerp, sub,
+    Vec3, add, cross, dot, lerp, mat3_from_quat, mat3_mul_vec, norm, normalize, quat_from_mat3,
+    scale, slerp, sub,
 };
 use crate::data::Scene;
 
 /// `n` cameras on a circle around `center`: distance `radius`, elevation `elevation` (radians,
 /// above the plane perpendicular to `up`), all looking at `center`, starting at azimuth
 /// `start` (radians, measured in that plane). Intrinsics and image size come from `template`.
-pub fn turntable(center: Vec3, up: Vec3, radius: f32, elevation: f32, start: f32, n: usize, template: &Camera) -> Vec<Camera> {
+pub fn turntable(
+    center: Vec3,
+    up: Vec3,
+    radius: f32,
+    elevation: f32,
+    start: f32,
+    n: usize,
+    template: &Camera,
+) -> Vec<Camera> {
     let up = normalize(up);
     let (e1, e2) = plane_basis(up);
     (0..n)
         .map(|k| {
             let az = start + k as f32 / n as f32 * std::f32::consts::TAU;
             let horizontal = add(scale(e1, az.cos()), scale(e2, az.sin()));
-            let dir = add(scale(horizontal, elevation.cos()), scale(up, elevation.sin()));
+            let dir = add(
+                scale(horizontal, elevation.cos()),
+                scale(up, elevation.sin()),
+            );
             let eye = add(center, scale(dir, radius));
-            Camera { c2w: pose_look_at(eye, center, up), ..template.clone() }
+            Camera {
+                c2w: pose_look_at(eye, center, up),
+                ..template.clone()
+            }
         })
         .collect()
 }
@@ -28,7 +43,11 @@ pub fn turntable(center: Vec3, up: Vec3, radius: f32, elevation: f32, start: f32
 /// their mean up vector, mean distance and mean elevation, starting at the first camera's
 /// azimuth. `None` when the scene has no training views.
 pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
-    let cams: Vec<&Camera> = scene.split(crate::data::Split::Train).iter().map(|&i| &scene.views[i].camera).collect();
+    let cams: Vec<&Camera> = scene
+        .split(crate::data::Split::Train)
+        .iter()
+        .map(|&i| &scene.views[i].camera)
+        .collect();
     let first = cams.first()?;
     let center = scene.bounds.center();
     let up = normalize(cams.iter().fold([0.0; 3], |a, c| add(a, c.up())));
@@ -52,25 +71,42 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
 /// camera positions, bob along the viewing axis at half the rate, and all look at the point at
 /// the "mean focus depth" `1 / (0.25/(0.9·min_depth) + 0.75/(5·max_depth))` in front of the
 /// average camera. `min_depth`/`max_depth` are the scene's depth bounds in the same frame.
-pub fn spiral(cameras: &[Camera], min_depth: f32, max_depth: f32, n: usize, rots: f32) -> Vec<Camera> {
-    let Some(template) = cameras.first() else { return Vec::new() };
+pub fn spiral(
+    cameras: &[Camera],
+    min_depth: f32,
+    max_depth: f32,
+    n: usize,
+    rots: f32,
+) -> Vec<Camera> {
+    let Some(template) = cameras.first() else {
+        return Vec::new();
+    };
     let avg = average_pose(cameras);
     let up = normalize(cameras.iter().fold([0.0; 3], |a, c| add(a, c.up())));
     let close = min_depth * 0.9;
     let inf = max_depth * 5.0;
     let dt = 0.75;
     let focal = 1.0 / ((1.0 - dt) / close + dt / inf);
-    let rads: [f32; 3] = std::array::from_fn(|k| percentile(cameras.iter().map(|c| c.origin()[k].abs()).collect(), 90.0));
+    let rads: [f32; 3] = std::array::from_fn(|k| {
+        percentile(cameras.iter().map(|c| c.origin()[k].abs()).collect(), 90.0)
+    });
     let rot = avg.map(|r| [r[0], r[1], r[2]]);
     let center = [avg[0][3], avg[1][3], avg[2][3]];
     let focus = add(center, mat3_mul_vec(&rot, [0.0, 0.0, -focal]));
     (0..n)
         .map(|k| {
             let theta = k as f32 / n as f32 * std::f32::consts::TAU * rots;
-            let local = [theta.cos() * rads[0], -theta.sin() * rads[1], -(theta * 0.5).sin() * rads[2]];
+            let local = [
+                theta.cos() * rads[0],
+                -theta.sin() * rads[1],
+                -(theta * 0.5).sin() * rads[2],
+            ];
             let c = add(center, mat3_mul_vec(&rot, local));
             let back = normalize(sub(c, focus));
-            Camera { c2w: pose_from_back_up(back, up, c), ..template.clone() }
+            Camera {
+                c2w: pose_from_back_up(back, up, c),
+                ..template.clone()
+            }
         })
         .collect()
 }
@@ -95,8 +131,13 @@ pub fn spiral_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
 /// sum of up axes, re-orthonormalized.
 pub fn average_pose(cameras: &[Camera]) -> [[f32; 4]; 3] {
     let n = cameras.len().max(1) as f32;
-    let center = scale(cameras.iter().fold([0.0; 3], |a, c| add(a, c.origin())), 1.0 / n);
-    let back = cameras.iter().fold([0.0; 3], |a, c| add(a, scale(c.forward(), -1.0)));
+    let center = scale(
+        cameras.iter().fold([0.0; 3], |a, c| add(a, c.origin())),
+        1.0 / n,
+    );
+    let back = cameras
+        .iter()
+        .fold([0.0; 3], |a, c| add(a, scale(c.forward(), -1.0)));
     let up = cameras.iter().fold([0.0; 3], |a, c| add(a, c.up()));
     pose_from_back_up(back, up, center)
 }
@@ -138,7 +179,11 @@ pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
 
 /// Two unit vectors spanning the plane perpendicular to unit vector `up`.
 fn plane_basis(up: Vec3) -> (Vec3, Vec3) {
-    let helper = if up[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let helper = if up[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
     let e1 = normalize(cross(up, helper));
     let e2 = cross(up, e1);
     (e1, e2)

@@ -69,7 +69,11 @@ impl Rays {
             let (o, d) = (self.origins[i], self.directions[i]);
             let t = -(near_plane + o[2]) / d[2];
             let o = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
-            let o_ndc = [-2.0 * focal / w * o[0] / o[2], -2.0 * focal / h * o[1] / o[2], 1.0 + 2.0 * near_plane / o[2]];
+            let o_ndc = [
+                -2.0 * focal / w * o[0] / o[2],
+                -2.0 * focal / h * o[1] / o[2],
+                1.0 + 2.0 * near_plane / o[2],
+            ];
             let d_ndc = [
                 -2.0 * focal / w * (d[0] / d[2] - o[0] / o[2]),
                 -2.0 * focal / h * (d[1] / d[2] - o[1] / o[2]),
@@ -172,22 +176,34 @@ impl Scene {
             pixels: Vec::with_capacity(pixels.len()),
         };
         for &p in pixels {
-            let v = self.views.get(p.view).ok_or_else(|| self.bad_view(p.view))?;
+            let v = self
+                .views
+                .get(p.view)
+                .ok_or_else(|| self.bad_view(p.view))?;
             if p.x >= v.camera.width || p.y >= v.camera.height {
-                return Err(DataError::Request(format!("pixel ({}, {}) is outside view {}", p.x, p.y, p.view)));
+                return Err(DataError::Request(format!(
+                    "pixel ({}, {}) is outside view {}",
+                    p.x, p.y, p.view
+                )));
             }
             let (o, d) = v.camera.pixel_ray(p.x, p.y);
             let (near, far) = self.ray_range(o, d);
             batch.rays.push(o, d, near, far);
             batch.rgb.push(v.image.rgb(p.x, p.y));
-            batch.mask.push(v.mask.as_ref().map_or(1.0, |m| m.value(p.x, p.y)));
+            batch
+                .mask
+                .push(v.mask.as_ref().map_or(1.0, |m| m.value(p.x, p.y)));
             batch.pixels.push(p);
         }
         Ok(batch)
     }
 
     pub(crate) fn bad_view(&self, view: usize) -> DataError {
-        DataError::Request(format!("view {view} does not exist ({} views in {})", self.views.len(), self.root.display()))
+        DataError::Request(format!(
+            "view {view} does not exist ({} views in {})",
+            self.views.len(),
+            self.root.display()
+        ))
     }
 }
 
@@ -203,14 +219,20 @@ pub struct RaySampler {
 impl RaySampler {
     /// A sampler of `batch_size` rays seeded by `seed`.
     pub fn new(batch_size: usize, seed: u64) -> Self {
-        RaySampler { batch_size, rng: SmallRng::seed_from_u64(seed) }
+        RaySampler {
+            batch_size,
+            rng: SmallRng::seed_from_u64(seed),
+        }
     }
 
     /// One batch from the views of `split`.
     pub fn sample(&mut self, scene: &Scene, split: Split) -> Result<RayBatch, DataError> {
         let views = scene.split(split);
         if views.is_empty() {
-            return Err(DataError::Request(format!("split {split} of {} has no views", scene.root.display())));
+            return Err(DataError::Request(format!(
+                "split {split} of {} has no views",
+                scene.root.display()
+            )));
         }
         let mut pixels = Vec::with_capacity(self.batch_size);
         for _ in 0..self.batch_size {

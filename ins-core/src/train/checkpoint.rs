@@ -146,8 +146,8 @@ impl CheckpointStore {
         if !latest.exists() {
             return Ok(None);
         }
-        let name = fs::read_to_string(&latest)
-            .with_context(|| format!("reading {}", latest.display()))?;
+        let name =
+            fs::read_to_string(&latest).with_context(|| format!("reading {}", latest.display()))?;
         let dir = self.dir.join(name.trim());
         if !dir.is_dir() {
             bail!(

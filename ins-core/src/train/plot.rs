@@ -43,9 +43,22 @@ pub fn plot_losses(series: &[Series], path: &Path) -> Result<()> {
     } else {
         let x0 = all.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
         let x1 = all.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
-        let y0 = all.iter().map(|p| p.1).fold(f64::INFINITY, f64::min).floor();
-        let y1 = all.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max).ceil();
-        (x0, if x1 > x0 { x1 } else { x0 + 1.0 }, y0, if y1 > y0 { y1 } else { y0 + 1.0 })
+        let y0 = all
+            .iter()
+            .map(|p| p.1)
+            .fold(f64::INFINITY, f64::min)
+            .floor();
+        let y1 = all
+            .iter()
+            .map(|p| p.1)
+            .fold(f64::NEG_INFINITY, f64::max)
+            .ceil();
+        (
+            x0,
+            if x1 > x0 { x1 } else { x0 + 1.0 },
+            y0,
+            if y1 > y0 { y1 } else { y0 + 1.0 },
+        )
     };
     let pw = w as i32 - left - right;
     let ph = h as i32 - top - bottom;
@@ -66,7 +79,13 @@ pub fn plot_losses(series: &[Series], path: &Path) -> Result<()> {
         let x = x0 + (x1 - x0) * i as f64 / 4.0;
         let px = sx(x);
         c.line(px, top, px, top + ph, grey);
-        c.text(px - 10, top + ph + 8, &format!("{}", x.round() as i64), black, 2);
+        c.text(
+            px - 10,
+            top + ph + 8,
+            &format!("{}", x.round() as i64),
+            black,
+            2,
+        );
     }
     c.text(left + pw / 2 - 20, h as i32 - 14, "step", black, 2);
     c.rect_outline(left, top, pw, ph, black);

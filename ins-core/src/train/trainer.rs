@@ -212,7 +212,11 @@ impl Trainer {
     }
 
     /// Trains `model` on `task`, resuming from the run folder's newest checkpoint if asked.
-    pub fn run<T: Task>(&self, task: &mut T, mut model: T::Model) -> Result<TrainOutcome<T::Model>> {
+    pub fn run<T: Task>(
+        &self,
+        task: &mut T,
+        mut model: T::Model,
+    ) -> Result<TrainOutcome<T::Model>> {
         let out = &self.opts.out_dir;
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
         let store = CheckpointStore::new(out.join("checkpoints"), 2);
@@ -229,8 +233,9 @@ impl Trainer {
                     let origin = store.dir().join("latest");
                     model = load_module_bytes(model, ckpt.model, &origin)?;
                     groups.load_bytes(ckpt.optim)?;
-                    state = serde_json::from_value(ckpt.state)
-                        .with_context(|| format!("{}: malformed trainer state", origin.display()))?;
+                    state = serde_json::from_value(ckpt.state).with_context(|| {
+                        format!("{}: malformed trainer state", origin.display())
+                    })?;
                 }
                 None => bail!(
                     "--resume: no checkpoint in {} (start without --resume)",
