@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # The test suite: installs what is missing, then runs every test of the workspace.
-# The first run builds Burn (about 30 minutes on 2 cores) and fetches VGG-16 (65 MB) once.
+# It builds into the same target folder as the README's main command (./target, release
+# profile), so on a fresh machine Burn compiles once for both. The first run builds Burn
+# (about 30 minutes on 2 cores) and fetches VGG-16 (65 MB) once.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/ins-rs-target}"
 # wgpu runs on Mesa's software Vulkan here: autotuning kernels there costs minutes and tells nothing.
 export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
 cargo test --release --workspace "$@"

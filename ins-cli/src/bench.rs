@@ -8,11 +8,17 @@ use burn::tensor::Distribution;
 use clap::Args;
 use ins_core::backend::BackendChoice;
 use ins_core::data::plain_image::pixel_coordinates;
-use ins_core::loss::{StyleTarget, content_loss, style_loss};
+use ins_core::loss::{StyleTarget, content_loss, mse, style_loss};
+use ins_core::modules::field::CimKind;
+use ins_core::render::geometry::Vec3;
+use ins_core::render::rays::Rays;
+use ins_models::nerf::NerfModel;
+use ins_models::nerf::model::NerfArch;
+use ins_models::nerf::render::{RenderRays, Sampling, render};
 use ins_core::modules::cim::SirenCimConfig;
 use ins_core::modules::ins::Ins;
 use ins_core::modules::sim::SimConfig;
-use ins_core::train::groups::{OptimGroups, Optimizable};
+use burn::optim::{AdamConfig, GradientsParams};
 use vgg_import::Vgg16Features;
 
 #[derive(Args, Debug)]
@@ -31,7 +37,9 @@ const STYLE_WEIGHT: f64 = 1e8;
 
 pub fn run(args: BenchArgs) -> Result<()> {
     let workloads = if args.workloads.is_empty() {
-        vec!["vgg".to_string(), "siren".to_string()]
+        ["vgg", "siren", "nerf-pretrain", "nerf-stylize", "nerf-grid"]
+            .map(String::from)
+            .to_vec()
     } else {
         args.workloads.clone()
     };
@@ -42,28 +50,43 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let times = match w.as_str() {
             "vgg" => bench_vgg(&device, args.steps)?,
             "siren" => bench_siren(&device, args.steps)?,
-            "nerf-pretrain" | "nerf-stylize" => {
-                bail!("workload {w} needs the NeRF variant, which is not implemented yet")
-            }
-            other => bail!("unknown workload {other:?} (known: vgg, siren)"),
+            "nerf-pretrain" => bench_nerf_pretrain(&device, args.steps)?,
+            "nerf-stylize" => bench_nerf_stylize(&device, args.steps)?,
+            "nerf-grid" => bench_nerf_grid(&device, args.steps)?,
+            "hash-grid" => bench_hash_grid(&device, args.steps, true)?,
+            "hash-grid-reference" => bench_hash_grid(&device, args.steps, false)?,
+            other => bail!(
+                "unknown workload {other:?} (known: vgg, siren, nerf-pretrain, nerf-stylize, nerf-grid, hash-grid, hash-grid-reference)"
+            ),
         };
         let mut sorted = times.clone();
         sorted.sort_by(|a, b| a.total_cmp(b));
         let median = sorted[sorted.len() / 2];
-        println!(
-            "{}",
-            serde_json::json!({
-                "workload": w,
-                "backend": backend.to_string(),
-                "ms_per_step": (median * 10.0).round() / 10.0,
-                "steps": times.len(),
-                "min_ms": (sorted[0] * 10.0).round() / 10.0,
-                "max_ms": (sorted[sorted.len() - 1] * 10.0).round() / 10.0,
-                "peak_rss_mb": peak_rss_mb(),
-            })
-        );
+        let mut line = serde_json::json!({
+            "workload": w,
+            "backend": backend.to_string(),
+            "ms_per_step": (median * 10.0).round() / 10.0,
+            "steps": times.len(),
+            "min_ms": (sorted[0] * 10.0).round() / 10.0,
+            "max_ms": (sorted[sorted.len() - 1] * 10.0).round() / 10.0,
+            "peak_rss_mb": peak_rss_mb(),
+        });
+        if let Some(rays) = rays_per_step(w) {
+            line["rays_per_s"] = ((rays as f64 / median * 1e3).round()).into();
+        }
+        println!("{line}");
     }
     Ok(())
+}
+
+/// Rays per step of the NeRF workloads.
+fn rays_per_step(w: &str) -> Option<usize> {
+    match w {
+        "nerf-pretrain" | "nerf-stylize" => Some(1024),
+        "nerf-grid" => Some(GRID_RAYS),
+        "hash-grid" | "hash-grid-reference" => Some(GRID_POINTS),
+        _ => None,
+    }
 }
 
 /// Peak resident memory of this process (Linux), in MiB.
@@ -124,18 +147,199 @@ fn bench_siren(device: &Device, steps: usize) -> Result<Vec<f64>> {
         device,
     );
     let code = Tensor::<2>::from_floats([[1.0, 0.0]], device);
-    let mut groups =
-        OptimGroups::new(<Ins<ins_core::modules::cim::SirenCim> as Optimizable>::group_names());
+    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
     timed(steps, || {
         let m = model.take().expect("model");
         let rgb = m.forward(coords.clone(), code.clone());
         let img = rgb.reshape([1, side, side, 3]).permute([0, 3, 1, 2]);
         let f = vgg.forward(img);
         let loss = style_loss(&f, &targets).mul_scalar(STYLE_WEIGHT) + content_loss(&f, &content);
-        let mut grads = loss.backward();
-        let m = m.optimize(&mut grads, 1e-4, &mut groups);
+        let grads = GradientsParams::from_grads(loss.backward(), &m);
+        let m = adam.step(1e-4, m, grads);
         let _ = m.am.gamma.val().into_scalar::<f32>();
         model = Some(m);
+        Ok(())
+    })
+}
+
+/// BENCHMARKS.md's rays: origins near (0, 0, 4), directions near −z, depth range [2, 6].
+fn bench_rays(n: usize, seed: u64) -> RenderRays {
+    use rand::SeedableRng;
+    use rand_distr_free::normal;
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+    let mut rays = Rays::default();
+    for _ in 0..n {
+        let o = Vec3::new(0.1 * normal(&mut rng), 0.1 * normal(&mut rng), 4.0 + 0.1 * normal(&mut rng));
+        let d = Vec3::new(0.2 * normal(&mut rng), 0.2 * normal(&mut rng), -1.0 + 0.2 * normal(&mut rng))
+            .normalize();
+        rays.push(o, d, 2.0, 6.0);
+    }
+    RenderRays {
+        view_dirs: rays.directions.clone(),
+        rays,
+    }
+}
+
+/// Standard normal draws without another dependency (Box–Muller).
+mod rand_distr_free {
+    use rand::Rng;
+    pub fn normal(rng: &mut impl Rng) -> f32 {
+        let u1: f32 = rng.random::<f32>().max(1e-12);
+        let u2: f32 = rng.random();
+        (-2.0 * u1.ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+    }
+}
+
+fn mlp_arch() -> NerfArch {
+    NerfArch {
+        cim: CimKind::Mlp,
+        log2_table: 17,
+        max_resolution: 1024,
+    }
+}
+
+const BOX: [f32; 6] = [-1.5, -1.5, -1.5, 1.5, 1.5, 1.5];
+
+fn bench_nerf_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
+    let mut model = Some(NerfModel::new(&mlp_arch(), BOX, device));
+    let rays = bench_rays(1024, 1);
+    let target = Tensor::<2>::random([1024, 3], Distribution::Uniform(0.0, 1.0), device);
+    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let sampling = Sampling::CoarseFine { coarse: 64, fine: 64 };
+    let mut seed = 0;
+    timed(steps, || {
+        let m = model.take().expect("model");
+        seed += 1;
+        let r = render(&m, &rays, sampling, None, [0.0; 3], Some(seed), device);
+        let loss = mse(r.fine.rgb, target.clone())
+            + mse(r.coarse_rgb.expect("coarse render"), target.clone());
+        let grads = GradientsParams::from_grads(loss.backward(), &m);
+        let m = adam.step(5e-4, m, grads);
+        let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+        model = Some(m);
+        Ok(())
+    })
+}
+
+fn bench_nerf_stylize(device: &Device, steps: usize) -> Result<Vec<f64>> {
+    let vgg = Vgg16Features::random(device);
+    let tf = vgg.forward(Tensor::<4>::random([1, 3, 256, 256], Distribution::Uniform(0.0, 1.0), device));
+    let targets = StyleTarget::from_features(&tf).grams;
+    let content = vgg
+        .forward(Tensor::<4>::random([1, 3, 32, 32], Distribution::Uniform(0.0, 1.0), device))
+        .relu2_2
+        .detach();
+    let base = NerfModel::new(&mlp_arch(), BOX, device);
+    let teacher = base.field.geometry.clone().no_grad();
+    let mut m0 = base.with_stylizer(2, 256, 10, device);
+    m0.coarse = m0.coarse.map(|c| c.no_grad());
+    let mut model = Some(m0);
+    let rays = bench_rays(1024, 2);
+    let code = Tensor::<2>::from_floats([[1.0, 0.0]], device);
+    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let sampling = Sampling::CoarseFine { coarse: 64, fine: 64 };
+    let mut seed = 0;
+    timed(steps, || {
+        let m = model.take().expect("model");
+        seed += 1;
+        let r = render(&m, &rays, sampling, Some(code.clone()), [0.0; 3], Some(seed), device);
+        let img = r.fine.rgb.reshape([1, 32, 32, 3]).permute([0, 3, 1, 2]);
+        let f = vgg.forward(img);
+        let (teacher_raw, _) = teacher.forward(r.points.detach());
+        let [s, n] = r.raw.dims();
+        let geo = (r.raw - teacher_raw.detach().reshape([1, n]).expand([s, n])).abs().mean();
+        let loss = style_loss(&f, &targets).mul_scalar(STYLE_WEIGHT)
+            + content_loss(&f, &content)
+            + geo.mul_scalar(1e6);
+        let grads = GradientsParams::from_grads(loss.backward(), &m);
+        let m = adam.step(5e-4, m, grads);
+        let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+        model = Some(m);
+        Ok(())
+    })
+}
+
+/// Rays of a `nerf-grid` step.
+const GRID_RAYS: usize = 4096;
+
+/// A grid pretraining step: 4096 random rays through an occupancy grid whose occupied region is
+/// a ball of radius 0.8 (about the share of space a lego-like object fills), photometric MSE,
+/// backward, Adam.
+fn bench_nerf_grid(device: &Device, steps: usize) -> Result<Vec<f64>> {
+    let arch = NerfArch {
+        cim: CimKind::Grid,
+        log2_table: 17,
+        max_resolution: 1024,
+    };
+    let mut model = Some(NerfModel::new(&arch, BOX, device));
+    let mut grid = ins_models::nerf::run::fresh_grid(BOX, 128);
+    grid.update(usize::MAX, 1, |p| {
+        p.chunks_exact(3)
+            .map(|q| if Vec3::new(q[0], q[1], q[2]).length() < 0.8 { 100.0 } else { 0.0 })
+            .collect()
+    });
+    let rays = bench_rays(GRID_RAYS, 3);
+    let target = Tensor::<2>::random([GRID_RAYS, 3], Distribution::Uniform(0.0, 1.0), device);
+    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut seed = 0;
+    timed(steps, || {
+        let m = model.take().expect("model");
+        seed += 1;
+        let sampling = Sampling::Occupancy {
+            grid: &grid,
+            max_per_ray: 512,
+        };
+        let verbose = std::env::var_os("INS_BENCH_VERBOSE").is_some();
+        let t0 = Instant::now();
+        let r = render(&m, &rays, sampling, None, [1.0; 3], Some(seed), device);
+        let loss = mse(r.fine.rgb, target.clone());
+        if verbose {
+            let _ = loss.clone().into_scalar::<f32>();
+        }
+        let t1 = Instant::now();
+        let grads = GradientsParams::from_grads(loss.backward(), &m);
+        let t2 = Instant::now();
+        let m = adam.step(1e-2, m, grads);
+        if verbose {
+            let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+            eprintln!(
+                "samples {} forward {:?} backward {:?} adam {:?}",
+                r.samples,
+                t1 - t0,
+                t2 - t1,
+                t2.elapsed()
+            );
+        }
+        let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+        model = Some(m);
+        Ok(())
+    })
+}
+
+/// Points of a `hash-grid` step.
+const GRID_POINTS: usize = 1 << 17;
+
+/// The hash encoding alone (16 levels × 2 features, T = 2^17, resolutions 16…1024) of 2^17
+/// random points, forward and backward to the table: through the kernel op (`kernel`) or the
+/// plain Burn-ops reference.
+fn bench_hash_grid(device: &Device, steps: usize, kernel: bool) -> Result<Vec<f64>> {
+    use ins_core::modules::hash_grid::{HashGridConfig, op, reference};
+    let grid = HashGridConfig::new().init(device);
+    let x = Tensor::<2>::random([GRID_POINTS, 3], Distribution::Uniform(0.0, 1.0), device);
+    let g = Tensor::<2>::random([GRID_POINTS, grid.d_out()], Distribution::Default, device);
+    if kernel && !op::kernel_device(device) {
+        bail!("the hash-grid kernel runs on flex and ndarray only (this is {device:?})");
+    }
+    timed(steps, || {
+        let t = grid.table.val();
+        let enc = if kernel {
+            op::encode_kernel(x.clone(), t.clone(), grid.shape)
+        } else {
+            reference::encode(x.clone(), t.clone(), grid.shape)
+        };
+        let grads = (enc * g.clone()).sum().backward();
+        let gt = t.grad(&grads).ok_or_else(|| anyhow::anyhow!("no table gradient"))?;
+        let _ = gt.slice([0..1, 0..1]).into_scalar::<f32>();
         Ok(())
     })
 }

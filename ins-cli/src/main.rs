@@ -3,10 +3,18 @@
 
 mod bench;
 mod data_cmd;
+mod nerf_cmd;
 mod siren_cmd;
 mod vgg_cmd;
+mod video;
 
-use clap::{Parser, Subcommand};
+use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
+
+/// mimalloc keeps freed pages for reuse: training steps allocate and free the same large
+/// tensors every step, and the system allocator returned them to the OS each time (a tenth of
+/// a NeRF step went to page faults).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// Stylized implicit neural representations (INS, ECCV 2022) on Burn.
 #[derive(Parser, Debug)]
@@ -21,12 +29,17 @@ enum Command {
     /// Train a stylized representation.
     Train {
         #[command(subcommand)]
-        variant: siren_cmd::TrainVariant,
+        variant: TrainVariant,
     },
     /// Render a trained representation.
     Render {
         #[command(subcommand)]
-        variant: siren_cmd::RenderVariant,
+        variant: RenderVariant,
+    },
+    /// Evaluate a trained representation.
+    Eval {
+        #[command(subcommand)]
+        variant: EvalVariant,
     },
     /// VGG-16 weights: fetch, inspect, extract features.
     Vgg {
@@ -42,18 +55,70 @@ enum Command {
     Bench(bench::BenchArgs),
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+#[derive(Subcommand, Debug)]
+enum TrainVariant {
+    /// SIREN + INS: fit an image, then stylize it (one or several styles).
+    Siren(siren_cmd::TrainSiren),
+    /// NeRF + INS: pretrain a radiance field on a scene (--scene), or stylize one (--from).
+    Nerf(nerf_cmd::TrainNerf),
+}
+
+#[derive(Subcommand, Debug)]
+enum RenderVariant {
+    /// Render a SIREN + INS run at any size and style mix.
+    Siren(siren_cmd::RenderSiren),
+    /// Render views, a split or a camera path of a NeRF run (PNG, folder, GIF, MP4).
+    Nerf(nerf_cmd::RenderNerf),
+}
+
+#[derive(Subcommand, Debug)]
+enum EvalVariant {
+    /// PSNR and SSIM on held-out views; depth and opacity against the teacher for stylized runs.
+    Nerf(nerf_cmd::EvalNerf),
+}
+
+/// The matches of `train <variant>`, where a variant's flags live (to tell flags given on the
+/// command line from defaults when merging a `--config` file).
+fn variant_matches<'a>(m: &'a ArgMatches, command: &str) -> &'a ArgMatches {
+    m.subcommand_matches(command)
+        .and_then(|t| t.subcommand().map(|(_, v)| v))
+        .unwrap_or(m)
+}
+
+fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
     match cli.command {
-        Command::Train { variant } => siren_cmd::train(variant),
-        Command::Render { variant } => siren_cmd::render(variant),
+        Command::Train { variant } => {
+            let m = variant_matches(matches, "train");
+            match variant {
+                TrainVariant::Siren(a) => siren_cmd::train(a, m),
+                TrainVariant::Nerf(a) => nerf_cmd::train(a, m),
+            }
+        }
+        Command::Render { variant } => match variant {
+            RenderVariant::Siren(a) => siren_cmd::render(a),
+            RenderVariant::Nerf(a) => nerf_cmd::render(a),
+        },
+        Command::Eval { variant } => match variant {
+            EvalVariant::Nerf(a) => nerf_cmd::eval(a),
+        },
         Command::Vgg { command } => vgg_cmd::run(command),
         Command::Data { command } => data_cmd::run(command),
         Command::Bench(args) => bench::run(args),
     }
 }
 
+/// mimalloc's `purge_delay` option (`mi_option_t` 15; the sys crate names no constant for it).
+const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
+
 fn main() {
-    let cli = Cli::parse();
+    // Never hand freed memory back to the OS: the next step needs the same amount again.
+    // SAFETY: plain option setter of the allocator, called before any thread exists.
+    unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, -1) };
+    let matches = Cli::command().get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(c) => c,
+        Err(e) => e.exit(),
+    };
     // Probing for a GPU loads Vulkan drivers whose window-system part complains on stderr when
     // a headless machine has no XDG_RUNTIME_DIR; give it a harmless one. Done first, while the
     // program is still single-threaded.
@@ -62,8 +127,10 @@ fn main() {
         unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
     }
     // Errors are reported as one message naming the problem; an internal panic is reported
-    // the same way rather than as a backtrace.
-    std::panic::set_hook(Box::new(|info| {
+    // the same way rather than as a backtrace. With RUST_BACKTRACE set, both also print where
+    // they came from.
+    let backtrace = std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0");
+    std::panic::set_hook(Box::new(move |info| {
         let msg = info
             .payload()
             .downcast_ref::<String>()
@@ -75,11 +142,17 @@ fn main() {
             .map(|l| format!(" (at {}:{})", l.file(), l.line()))
             .unwrap_or_default();
         eprintln!("error: internal failure: {msg}{at}");
+        if backtrace {
+            eprintln!("{}", std::backtrace::Backtrace::force_capture());
+        }
     }));
-    match std::panic::catch_unwind(|| run(cli)) {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(cli, &matches))) {
         Ok(Ok(())) => {}
         Ok(Err(e)) => {
             eprintln!("error: {e:#}");
+            if backtrace {
+                eprintln!("{}", e.backtrace());
+            }
             std::process::exit(1);
         }
         Err(_) => std::process::exit(101),

@@ -1,73 +1,46 @@
 //! `ins-cli train siren` and `ins-cli render siren`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
-use clap::{Args, Subcommand};
+use clap::{ArgMatches, Args};
 use ins_core::backend::BackendChoice;
-use ins_core::loss::LossWeights;
 use ins_core::train::TrainOptions;
+use ins_models::config::merge_with_file;
 use ins_models::siren::{SirenRun, SirenRunConfig};
 use vgg_import::load_vgg;
 
 use crate::vgg_cmd::VggArgs;
 
-#[derive(Subcommand, Debug)]
-pub enum TrainVariant {
-    /// SIREN + INS: fit an image, then stylize it (one or several styles).
-    Siren(TrainSiren),
-}
-
-#[derive(Subcommand, Debug)]
-pub enum RenderVariant {
-    /// Render a SIREN + INS run at any size and style mix.
-    Siren(RenderSiren),
+/// Options of every training command that are about the run, not the model.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// Backend: auto, flex, ndarray or wgpu.
+    #[arg(long, default_value = "auto")]
+    pub backend: BackendChoice,
+    /// JSON config (fields of a run's config.json); flags given on the command line override it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Continue the run in --out from its newest checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 #[derive(Args, Debug)]
 pub struct TrainSiren {
-    /// Content image (default: a built-in generated scene).
-    #[arg(long)]
-    content: Option<PathBuf>,
-    /// Style image; repeat for a conditional multi-style model (default: a built-in generated painting).
-    #[arg(long = "style")]
-    styles: Vec<PathBuf>,
     /// Run folder (images, loss curve, metrics, config, checkpoints).
     #[arg(long, default_value = "runs/siren")]
     out: PathBuf,
-    /// Total steps, split evenly between fitting and stylizing.
+    /// Total steps, split evenly between fitting and stylizing (overrides both).
     #[arg(long)]
     steps: Option<usize>,
-    /// Steps fitting the content (overrides --steps).
-    #[arg(long)]
-    fit_steps: Option<usize>,
-    /// Steps stylizing (overrides --steps).
-    #[arg(long)]
-    stylize_steps: Option<usize>,
-    /// Longer side of the content at training time, in pixels.
-    #[arg(long)]
-    size: Option<usize>,
-    /// Style loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    style_weight: Option<f64>,
-    /// Content loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    content_weight: Option<f64>,
-    /// Backend: auto, flex, ndarray or wgpu.
-    #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
-    /// Seed.
-    #[arg(long)]
-    seed: Option<u64>,
-    /// JSON config (fields of config.json); flags override it.
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// Continue the run in --out from its newest checkpoint.
-    #[arg(long)]
-    resume: bool,
-    /// No progress bar.
-    #[arg(long)]
-    quiet: bool,
+    #[command(flatten)]
+    config: SirenRunConfig,
+    #[command(flatten)]
+    run: RunArgs,
     #[command(flatten)]
     vgg: VggArgs,
 }
@@ -94,61 +67,31 @@ pub struct RenderSiren {
     backend: BackendChoice,
 }
 
-pub fn train(variant: TrainVariant) -> Result<()> {
-    let TrainVariant::Siren(a) = variant;
-    let mut cfg = match &a.config {
-        Some(p) => SirenRunConfig::from_file(p)?,
-        None => SirenRunConfig::default(),
-    };
-    let inputs = a.out.join("inputs");
-    match a.content {
-        Some(c) => cfg.content = c,
-        None if cfg.content.as_os_str().is_empty() => {
-            let p = inputs.join("demo_content.png");
-            if !p.exists() {
-                ins_models::demo::demo_content(256).save(&p)?;
-            }
-            cfg.content = p;
-        }
-        None => {}
+/// Writes a generated demo input once (atomically, so a killed run never leaves half of one).
+fn demo_input(dir: &Path, name: &str, make: fn(usize) -> ins_core::imaging::RgbImage) -> Result<PathBuf> {
+    let p = dir.join(name);
+    if !p.exists() {
+        make(256).save(&p)?;
     }
-    if !a.styles.is_empty() {
-        cfg.styles = a.styles;
-    } else if cfg.styles.is_empty() {
-        let p = inputs.join("demo_style.png");
-        if !p.exists() {
-            ins_models::demo::demo_style(256).save(&p)?;
-        }
-        cfg.styles = vec![p];
+    Ok(p)
+}
+
+pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
+    let mut cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
+    let inputs = a.out.join("inputs");
+    if cfg.content.is_none() {
+        cfg.content = Some(demo_input(&inputs, "demo_content.png", ins_models::demo::demo_content)?);
+    }
+    if cfg.styles.is_empty() {
+        cfg.styles = vec![demo_input(&inputs, "demo_style.png", ins_models::demo::demo_style)?];
     }
     if let Some(n) = a.steps {
         cfg.fit_steps = n / 2;
         cfg.stylize_steps = n - n / 2;
     }
-    if let Some(n) = a.fit_steps {
-        cfg.fit_steps = n;
-    }
-    if let Some(n) = a.stylize_steps {
-        cfg.stylize_steps = n;
-    }
-    if let Some(s) = a.size {
-        cfg.size = s;
-    }
-    if let Some(s) = a.seed {
-        cfg.seed = s;
-    }
-    let backend = a.backend.resolve();
+    let backend = a.run.backend.resolve();
     let device = backend.device();
     let vgg = load_vgg(&a.vgg.source(), &device)?;
-    if a.style_weight.is_some() || a.content_weight.is_some() {
-        let d = cfg
-            .weights
-            .unwrap_or_else(|| LossWeights::default_for(vgg.preprocess));
-        cfg.weights = Some(LossWeights {
-            content: a.content_weight.unwrap_or(d.content),
-            style: a.style_weight.unwrap_or(d.style),
-        });
-    }
     eprintln!(
         "training SIREN+INS on {backend} ({} style{}, VGG preprocessing {}) into {}",
         cfg.styles.len(),
@@ -159,8 +102,8 @@ pub fn train(variant: TrainVariant) -> Result<()> {
     let mut opts = TrainOptions::new(&a.out);
     opts.seed = cfg.seed;
     opts.checkpoint_every = cfg.checkpoint_every;
-    opts.resume = a.resume;
-    opts.quiet = a.quiet;
+    opts.resume = a.run.resume;
+    opts.quiet = a.run.quiet;
     let outcome = ins_models::siren::train(&cfg, vgg, &device, opts)?;
     let summary = serde_json::json!({
         "run": a.out,
@@ -177,7 +120,8 @@ pub fn train(variant: TrainVariant) -> Result<()> {
     Ok(())
 }
 
-fn parse_size(s: &str) -> Result<(usize, usize)> {
+/// Parses `WxH`.
+pub fn parse_size(s: &str) -> Result<(usize, usize)> {
     let parts: Vec<&str> = s.split(['x', 'X']).collect();
     if parts.len() != 2 {
         bail!("--size {s:?}: expected WxH, e.g. 512x512");
@@ -194,13 +138,15 @@ fn parse_size(s: &str) -> Result<(usize, usize)> {
     Ok((w, h))
 }
 
-pub fn render(variant: RenderVariant) -> Result<()> {
-    let RenderVariant::Siren(a) = variant;
+pub fn render(a: RenderSiren) -> Result<()> {
     let device = a.backend.device();
     let run = SirenRun::load(&a.run, &device)?;
-    let content = ins_core::imaging::RgbImage::load(&run.config.content)
-        .map(|c| c.fit_within(run.config.size))
-        .ok();
+    let content = run
+        .config
+        .content
+        .as_deref()
+        .and_then(|p| ins_core::imaging::RgbImage::load(p).ok())
+        .map(|c| c.fit_within(run.config.size));
     let (w, h) = match &a.size {
         Some(s) => parse_size(s)?,
         None => content

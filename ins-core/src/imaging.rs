@@ -89,22 +89,43 @@ impl RgbImage {
         })
     }
 
-    /// Saves as PNG (or any format the extension names).
+    /// Saves as PNG (or any format the extension names), atomically: a killed process leaves
+    /// the old file or the new one, never half of one.
     pub fn save(&self, path: &Path) -> Result<()> {
-        if let Some(dir) = path.parent()
-            && !dir.as_os_str().is_empty()
-        {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        }
         let bytes: Vec<u8> = self
             .data
             .iter()
             .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect();
-        image::RgbImage::from_raw(self.width as u32, self.height as u32, bytes)
-            .context("image size")?
-            .save(path)
-            .with_context(|| format!("writing {}", path.display()))
+        let img = image::RgbImage::from_raw(self.width as u32, self.height as u32, bytes)
+            .context("image size")?;
+        let format = image::ImageFormat::from_path(path)
+            .with_context(|| format!("{}: unknown image extension", path.display()))?;
+        ins_io::write_atomic_with(path, |tmp| {
+            img.save_with_format(tmp, format)
+                .with_context(|| format!("writing {}", path.display()))
+        })
+    }
+
+    /// Images stacked top to bottom (narrower ones padded with white on the right).
+    pub fn vstack(images: &[RgbImage]) -> Self {
+        let width = images.iter().map(|i| i.width).max().unwrap_or(0);
+        let height: usize = images.iter().map(|i| i.height).sum();
+        let mut data = vec![1.0f32; width * height * 3];
+        let mut y0 = 0;
+        for img in images {
+            for y in 0..img.height {
+                let src = &img.data[y * img.width * 3..(y + 1) * img.width * 3];
+                let dst = ((y0 + y) * width) * 3;
+                data[dst..dst + img.width * 3].copy_from_slice(src);
+            }
+            y0 += img.height;
+        }
+        Self {
+            width,
+            height,
+            data,
+        }
     }
 
     /// Side-by-side strip of images of the same height.
@@ -127,4 +148,33 @@ impl RgbImage {
             data,
         }
     }
+}
+
+/// A colour for `t ∈ [0, 1]` on the turbo colour map (Mikhailov 2019, polynomial fit):
+/// blue near, red far, readable in print and by most colour-blind readers.
+pub fn turbo(t: f32) -> [f32; 3] {
+    let t = t.clamp(0.0, 1.0) as f64;
+    let poly = |c: [f64; 6]| {
+        (c[0] + t * (c[1] + t * (c[2] + t * (c[3] + t * (c[4] + t * c[5]))))).clamp(0.0, 1.0) as f32
+    };
+    [
+        poly([0.135_721_38, 4.615_392_6, -42.660_322_57, 132.131_082_34, -152.942_393_97, 59.286_379_16]),
+        poly([0.091_402_61, 2.194_188_39, 4.842_966_58, -14.185_033_33, 4.277_298_57, 2.829_566_04]),
+        poly([0.106_673_3, 12.641_946_08, -60.582_048_36, 110.362_767_71, -89.903_109_12, 27.348_249_81]),
+    ]
+}
+
+/// A depth map as a picture: `depth` divided by `opacity` where the opacity is above 0.5,
+/// mapped from `[near, far]` onto the turbo colours; transparent pixels are white.
+pub fn depth_image(depth: &[f32], opacity: &[f32], width: usize, height: usize, near: f32, far: f32) -> RgbImage {
+    let mut data = Vec::with_capacity(width * height * 3);
+    let span = (far - near).max(1e-6);
+    for (d, o) in depth.iter().zip(opacity) {
+        if *o > 0.5 {
+            data.extend(turbo((d / o - near) / span));
+        } else {
+            data.extend([1.0, 1.0, 1.0]);
+        }
+    }
+    RgbImage { width, height, data }
 }

@@ -2,8 +2,7 @@
 //!
 //! Data flows one way: [`data`] (posed images) → [`render`] (cameras, rays, samplers,
 //! renderers) → [`modules`] (SIM / CIM / AM) → [`loss`] → [`train`] (the one trainer).
-//! [`backend`] picks the compute device at run time; [`imaging`] and [`viz`] turn tensors into
-//! pictures.
+//! [`backend`] picks the compute device at run time; [`imaging`] turns tensors into pictures.
 
 pub mod backend;
 pub mod data;
@@ -12,4 +11,3 @@ pub mod loss;
 pub mod modules;
 pub mod render;
 pub mod train;
-pub mod viz;

@@ -14,7 +14,8 @@ use ins_core::modules::mlp::{ReluMlp, ReluMlpConfig};
 use ins_core::modules::sim::SimConfig;
 use ins_core::train::{Phase, TrainOptions, Trainer};
 use ins_models::demo::{demo_content, demo_style};
-use ins_models::image_task::{FIT, ImageTask, ImageTaskFor, PatchSpec, STYLIZE, render_image};
+use ins_core::render::patches::PatchSpec;
+use ins_models::image_task::{ImageObjective, ImageTask, ImageTaskFor, render_image};
 
 /// `x ↦ MLP([sin(2πBx), cos(2πBx)])` with a fixed random B.
 #[derive(Module, Debug)]
@@ -77,15 +78,16 @@ fn main() -> Result<()> {
         128,
         vgg,
         96 * 96,
-        PatchSpec {
-            size: 96,
-            stride: 1,
-        },
+        PatchSpec::new(96, 1),
         &ad,
-    );
+    )?;
     let phases = vec![
-        Phase::new(FIT, 300, 1e-3).weight("mse", 1.0),
-        Phase::new(STYLIZE, 150, 1e-3)
+        // Fitting trains the content path; SIM and AM wait for stylization.
+        Phase::new("fit", ImageObjective::Fit, 300, 1e-3)
+            .weight("mse", 1.0)
+            .freeze("sim")
+            .freeze("am"),
+        Phase::new("stylize", ImageObjective::Stylize, 150, 1e-3)
             .weight("style", weights.style)
             .weight("content", weights.content),
     ];

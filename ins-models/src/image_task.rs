@@ -15,15 +15,23 @@ use ins_core::imaging::RgbImage;
 use ins_core::loss::{StyleTarget, content_loss, mse, psnr, style_loss};
 use ins_core::modules::cim::ContentModule;
 use ins_core::modules::ins::Ins;
-use ins_core::train::{LossTerms, Phase, Task};
+use ins_core::render::patches::PatchSpec;
+use ins_core::train::{LossTerms, StepContext, Task};
+use rand::SeedableRng;
 use rand::rngs::SmallRng;
-use rand::{Rng, SeedableRng};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
 use vgg_import::Vgg;
 
-/// Name of the fitting phase.
-pub const FIT: &str = "fit";
-/// Name of the stylization phase.
-pub const STYLIZE: &str = "stylize";
+/// What a phase of the image task computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ImageObjective {
+    /// Pixel MSE on random batches: reconstruct the content.
+    Fit,
+    /// VGG style and content losses on strided patches, every style at once.
+    Stylize,
+}
 
 /// One-hot codes of `n` styles, `[n, n]`.
 pub fn one_hot_codes(n: usize, device: &Device) -> Tensor<2> {
@@ -70,15 +78,6 @@ pub fn render_image<C: ContentModule>(
     })
 }
 
-/// Patch geometry for stylization.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PatchSpec {
-    /// Rays (pixels) per side of the patch.
-    pub size: usize,
-    /// Pixel stride between neighbouring rays.
-    pub stride: usize,
-}
-
 /// The image task: content, styles, VGG and batch settings.
 pub struct ImageTask {
     device: Device,
@@ -91,12 +90,13 @@ pub struct ImageTask {
     codes: Tensor<2>,
     fit_batch: usize,
     patch: PatchSpec,
-    content_cache: HashMap<(usize, usize), Tensor<4>>,
+    content_cache: HashMap<(u32, u32), Tensor<4>>,
 }
 
 impl ImageTask {
     /// Prepares the task: content at its training size, style images (Gram targets at
-    /// `style_size` on the longer side), VGG on `device`.
+    /// `style_size` on the longer side), VGG on `device`. The patch shrinks to fit the content;
+    /// a stride too large for it is an error.
     pub fn new(
         content: RgbImage,
         styles: &[RgbImage],
@@ -105,7 +105,8 @@ impl ImageTask {
         fit_batch: usize,
         patch: PatchSpec,
         device: &Device,
-    ) -> Self {
+    ) -> Result<Self> {
+        let patch = patch.fitted(content.width as u32, content.height as u32)?;
         let targets: Vec<StyleTarget> = styles
             .iter()
             .map(|s| StyleTarget::from_image(&vgg, s.fit_within(style_size).to_tensor(device)))
@@ -116,7 +117,7 @@ impl ImageTask {
             device,
         )
         .reshape([content.width * content.height, 3]);
-        Self {
+        Ok(Self {
             device: device.clone(),
             coords: pixel_coordinates(content.width as u32, content.height as u32).into_flattened(),
             content,
@@ -128,15 +129,12 @@ impl ImageTask {
             fit_batch,
             patch,
             content_cache: HashMap::new(),
-        }
+        })
     }
 
-    /// The patch actually used: never larger than the image allows.
-    pub fn effective_patch(&self) -> PatchSpec {
-        let side = self.content.width.min(self.content.height);
-        let stride = self.patch.stride.max(1);
-        let size = self.patch.size.min(side / stride).max(16);
-        PatchSpec { size, stride }
+    /// The patch actually used (fitted to the content).
+    pub fn patch(&self) -> PatchSpec {
+        self.patch
     }
 
     fn gather(&self, idx: &[usize]) -> (Tensor<2>, Tensor<2>) {
@@ -162,8 +160,8 @@ impl ImageTask {
                 .collect()
         };
         let (coords, target) = self.gather(&idx);
-        // Every style row sees the same content: the AM starts as identity, and fitting under
-        // all codes keeps the content shared.
+        // The fitting phase freezes SIM and AM (see `SirenRunConfig::phases`): the AM stays the
+        // identity, so any one code renders the content and every style starts from it.
         let rgb = model.forward(coords, self.codes.clone().slice([0..1]));
         let [_, p, _] = rgb.dims();
         let loss = mse(rgb.reshape([p, 3]), target);
@@ -173,18 +171,15 @@ impl ImageTask {
     }
 
     fn stylize_losses<C: ContentModule>(&mut self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
-        let PatchSpec { size: k, stride: s } = self.effective_patch();
-        let (w, h) = (self.content.width, self.content.height);
+        let (w, h) = (self.content.width as u32, self.content.height as u32);
         let mut rng = SmallRng::seed_from_u64(seed);
-        let span = (k - 1) * s + 1;
-        let x0 = rng.random_range(0..=(w - span));
-        let y0 = rng.random_range(0..=(h - span));
-        let mut idx = Vec::with_capacity(k * k);
-        for j in 0..k {
-            for i in 0..k {
-                idx.push((y0 + j * s) * w + x0 + i * s);
-            }
-        }
+        let (x0, y0) = self.patch.random_origin(w, h, &mut rng)?;
+        let k = self.patch.size as usize;
+        let idx: Vec<usize> = self
+            .patch
+            .pixels(x0, y0)
+            .map(|(x, y)| y as usize * w as usize + x as usize)
+            .collect();
         let (coords, target) = self.gather(&idx);
         let target_key = (x0, y0);
         let content_target = match self.content_cache.get(&target_key) {
@@ -226,18 +221,19 @@ impl<'a, C> ImageTaskFor<'a, C> {
 
 impl<C: ContentModule> Task for ImageTaskFor<'_, C> {
     type Model = Ins<C>;
+    type Objective = ImageObjective;
 
-    fn losses(
-        &mut self,
-        model: &Ins<C>,
-        phase: &Phase,
-        _step: usize,
-        seed: u64,
-    ) -> Result<LossTerms> {
-        if phase.name == FIT {
-            self.task.fit_losses(model, seed)
-        } else {
-            self.task.stylize_losses(model, seed)
+    fn terms(&self, objective: ImageObjective) -> &'static [&'static str] {
+        match objective {
+            ImageObjective::Fit => &["mse"],
+            ImageObjective::Stylize => &["style", "content"],
+        }
+    }
+
+    fn losses(&mut self, model: &Ins<C>, step: &StepContext<ImageObjective>) -> Result<LossTerms> {
+        match step.phase.objective {
+            ImageObjective::Fit => self.task.fit_losses(model, step.seed),
+            ImageObjective::Stylize => self.task.stylize_losses(model, step.seed),
         }
     }
 }

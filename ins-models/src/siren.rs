@@ -19,81 +19,91 @@ use ins_core::train::{Phase, TrainOptions, TrainOutcome, Trainer};
 use serde::{Deserialize, Serialize};
 use vgg_import::Vgg;
 
-use crate::image_task::{FIT, ImageTask, ImageTaskFor, PatchSpec, STYLIZE, render_image};
+use crate::image_task::{ImageObjective, ImageTask, ImageTaskFor, render_image};
+use ins_core::render::patches::PatchSpec;
 
-/// Everything that defines a SIREN+INS run; written to `config.json` in the run folder.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(default)]
+/// Everything that defines a SIREN+INS run: the `ins-cli train siren` flags and the fields of
+/// the run's `config.json` are this one struct (unknown fields in a `--config` file are refused).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
+#[serde(default, deny_unknown_fields)]
 pub struct SirenRunConfig {
-    /// Content image.
-    pub content: PathBuf,
-    /// Style images (one-hot codes in this order).
+    /// Content image (default: a built-in generated scene).
+    #[arg(long)]
+    pub content: Option<PathBuf>,
+    /// Style image; repeat for a conditional multi-style model (default: a built-in generated
+    /// painting). One-hot codes follow this order.
+    #[arg(long = "style")]
     pub styles: Vec<PathBuf>,
-    /// Longer side of the content at training time.
+    /// Longer side of the content at training time, in pixels.
+    #[arg(long, default_value_t = 256)]
     pub size: usize,
     /// Longer side of the style images for their Gram targets.
+    #[arg(long, default_value_t = 128)]
     pub style_size: usize,
     /// Steps fitting the content.
+    #[arg(long, default_value_t = 300)]
     pub fit_steps: usize,
     /// Steps stylizing.
+    #[arg(long, default_value_t = 300)]
     pub stylize_steps: usize,
     /// Adam learning rate while fitting.
+    #[arg(long, default_value_t = 1e-4)]
     pub lr_fit: f64,
     /// Adam learning rate while stylizing.
+    #[arg(long, default_value_t = 1e-4)]
     pub lr_stylize: f64,
     /// Random pixels per fitting step.
+    #[arg(long, default_value_t = 8192)]
     pub fit_batch: usize,
     /// Stylization patch: rays per side.
+    #[arg(long, default_value_t = 128)]
     pub patch: usize,
-    /// Stylization patch stride (0: chosen so the patch spans the image).
+    /// Stylization patch stride in pixels (0: chosen so the patch spans the image).
+    #[arg(long, default_value_t = 0)]
     pub stride: usize,
     /// Width of the sine layers.
+    #[arg(long, default_value_t = 256)]
     pub hidden: usize,
     /// Number of sine layers.
+    #[arg(long, default_value_t = 4)]
     pub depth: usize,
-    /// ω₀.
+    /// SIREN's ω₀.
+    #[arg(long, default_value_t = 30.0)]
     pub omega0: f32,
     /// Width of the SIM.
+    #[arg(long, default_value_t = 64)]
     pub sim_hidden: usize,
-    /// Loss weights; `None` takes the defaults for the VGG's preprocessing.
-    pub weights: Option<LossWeights>,
+    /// Style loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    pub style_weight: Option<f64>,
+    /// Content loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    pub content_weight: Option<f64>,
     /// Seed.
+    #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Steps between checkpoints.
+    #[arg(long, default_value_t = 100)]
     pub checkpoint_every: usize,
 }
 
 impl Default for SirenRunConfig {
     fn default() -> Self {
-        Self {
-            content: PathBuf::new(),
-            styles: Vec::new(),
-            size: 256,
-            style_size: 128,
-            fit_steps: 300,
-            stylize_steps: 300,
-            lr_fit: 1e-4,
-            lr_stylize: 1e-4,
-            fit_batch: 8192,
-            patch: 128,
-            stride: 0,
-            hidden: 256,
-            depth: 4,
-            omega0: 30.0,
-            sim_hidden: 64,
-            weights: None,
-            seed: 0,
-            checkpoint_every: 100,
-        }
+        crate::config::clap_defaults()
     }
 }
 
 impl SirenRunConfig {
     /// Reads a JSON config (unknown fields are refused, missing ones take defaults).
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        serde_json::from_str(&text).with_context(|| format!("{}: malformed config", path.display()))
+        crate::config::read_json(path)
+    }
+
+    /// The content image path (set by the caller before training).
+    pub fn content_path(&self) -> Result<&Path> {
+        self.content
+            .as_deref()
+            .context("no content image: pass --content FILE")
     }
 
     /// The model this config describes (fresh weights, seeded by `device.seed`).
@@ -116,13 +126,31 @@ impl SirenRunConfig {
         }
     }
 
-    /// The two phases.
-    pub fn phases(&self, weights: LossWeights) -> Vec<Phase> {
+    /// Loss weights: the configured ones, else the defaults for the VGG's preprocessing.
+    pub fn weights(&self, preprocess: vgg_import::Preprocess) -> LossWeights {
+        let d = LossWeights::default_for(preprocess);
+        LossWeights {
+            content: self.content_weight.unwrap_or(d.content),
+            style: self.style_weight.unwrap_or(d.style),
+        }
+    }
+
+    /// The two phases. Fitting trains the content path (CIM and RGB head) with SIM and AM
+    /// frozen, so the AM is still the identity when stylization starts; stylizing trains all.
+    pub fn phases(&self, weights: LossWeights) -> Vec<Phase<ImageObjective>> {
         vec![
-            Phase::new(FIT, self.fit_steps, self.lr_fit).weight("mse", 1.0),
-            Phase::new(STYLIZE, self.stylize_steps, self.lr_stylize)
-                .weight("style", weights.style)
-                .weight("content", weights.content),
+            Phase::new("fit", ImageObjective::Fit, self.fit_steps, self.lr_fit)
+                .weight("mse", 1.0)
+                .freeze("sim")
+                .freeze("am"),
+            Phase::new(
+                "stylize",
+                ImageObjective::Stylize,
+                self.stylize_steps,
+                self.lr_stylize,
+            )
+            .weight("style", weights.style)
+            .weight("content", weights.content),
         ]
     }
 }
@@ -132,11 +160,11 @@ pub fn load_images(cfg: &SirenRunConfig) -> Result<(RgbImage, Vec<RgbImage>)> {
     if cfg.styles.is_empty() {
         bail!("at least one --style image is needed");
     }
-    let content = RgbImage::load(&cfg.content)?.fit_within(cfg.size);
+    let content = RgbImage::load(cfg.content_path()?)?.fit_within(cfg.size);
     if content.width < 16 || content.height < 16 {
         bail!(
             "{}: content is {}×{} at --size {}, too small (at least 16 px per side)",
-            cfg.content.display(),
+            cfg.content_path()?.display(),
             content.width,
             content.height,
             cfg.size
@@ -171,18 +199,13 @@ pub fn train(
             );
         }
     }
-    ins_core::train::checkpoint::write_atomic(
-        &config_path,
-        serde_json::to_string_pretty(cfg)?.as_bytes(),
-    )?;
+    ins_io::write_atomic(&config_path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
 
-    let weights = cfg
-        .weights
-        .unwrap_or_else(|| LossWeights::default_for(vgg.preprocess));
-    let patch = PatchSpec {
-        size: cfg.patch,
-        stride: cfg.effective_stride(content.width, content.height),
-    };
+    let weights = cfg.weights(vgg.preprocess);
+    let patch = PatchSpec::new(
+        cfg.patch as u32,
+        cfg.effective_stride(content.width, content.height) as u32,
+    );
     let ad = device.clone().autodiff();
     let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || cfg.build_model(&ad));
     let vgg = vgg.to_device(&ad);
@@ -194,7 +217,7 @@ pub fn train(
         cfg.fit_batch,
         patch,
         &ad,
-    );
+    )?;
     let trainer = Trainer::new(cfg.phases(weights), opts);
     let outcome = trainer.run(&mut ImageTaskFor::<SirenCim>::new(&mut task), model)?;
     if outcome.finished {

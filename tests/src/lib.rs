@@ -80,7 +80,7 @@ pub fn small_config(
     size: usize,
 ) -> ins_models::siren::SirenRunConfig {
     ins_models::siren::SirenRunConfig {
-        content,
+        content: Some(content),
         styles,
         size,
         style_size: 64,

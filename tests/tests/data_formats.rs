@@ -10,7 +10,7 @@ use ins_core::data::plain_image::{load_rgb, pixel_coordinates};
 use ins_core::data::synthetic::{self, SynthOptions, SynthScene};
 use ins_core::data::{LoadOptions, Scene, SceneFormat, Split};
 use ins_core::render::camera::Camera;
-use ins_core::render::geometry::{Vec3, dot, norm, orthonormality_error, sub};
+use ins_core::render::geometry::{Vec3, orthonormality_error};
 use ins_core::render::patches::PatchSampler;
 use ins_core::render::paths::{average_pose, interpolate, spiral_for_scene, turntable_for_scene};
 use ins_core::render::rays::RaySampler;
@@ -27,7 +27,19 @@ fn load(dir: &Path) -> Scene {
 }
 
 fn dist(a: Vec3, b: Vec3) -> f32 {
-    norm(sub(a, b))
+    (a - b).length()
+}
+
+fn sub(a: Vec3, b: Vec3) -> Vec3 {
+    a - b
+}
+
+fn dot(a: Vec3, b: Vec3) -> f32 {
+    a.dot(b)
+}
+
+fn norm(a: Vec3) -> f32 {
+    a.length()
 }
 
 /// For interior foreground pixels of every view (every 3rd in each direction), the loaded ray
@@ -55,15 +67,15 @@ fn assert_rays_hit_surface(
         for (k, &(x, y)) in pixels.iter().enumerate() {
             let t_world = r.depth[(y * r.width + x) as usize];
             let (o, d) = gt.camera.pixel_ray(x, y);
-            let p_world = [
+            let p_world = Vec3::new(
                 o[0] + t_world * d[0],
                 o[1] + t_world * d[1],
                 o[2] + t_world * d[2],
-            ];
+            );
             let expected = map(p_world);
             let got = rays.point(k, t_world * scale);
             assert!(
-                (norm(rays.directions[k]) - 1.0).abs() < 1e-5,
+                (rays.directions[k].length() - 1.0).abs() < 1e-5,
                 "direction not unit"
             );
             assert!(
@@ -175,7 +187,7 @@ fn llff_rays_hit_rendered_surface_after_rescale_and_recentre() {
         scene.to_scene.scale
     );
     assert!((scene.near - 0.9 / 0.75).abs() < 1e-4);
-    assert!(orthonormality_error(&scene.to_scene.rotation) < 1e-5);
+    assert!(orthonormality_error(scene.to_scene.rotation) < 1e-5);
     // Recentred: the average pose is the identity.
     let cams: Vec<Camera> = scene.views.iter().map(|v| v.camera.clone()).collect();
     let avg = average_pose(&cams);
@@ -202,9 +214,9 @@ fn llff_rays_hit_rendered_surface_after_rescale_and_recentre() {
 #[test]
 fn rays_follow_each_formats_own_definition() {
     let close = |a: Vec3, b: Vec3, what: &str| assert!(dist(a, b) < 1e-4, "{what}: {a:?} vs {b:?}");
-    let normalize = |v: Vec3| {
-        let n = norm(v);
-        [v[0] / n, v[1] / n, v[2] / n]
+    let normalize = |v: [f32; 3]| {
+        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        Vec3::new(v[0] / n, v[1] / n, v[2] / n)
     };
     let pixels = [(0u32, 0u32), (31, 0), (5, 20), (16, 11)];
 
@@ -229,7 +241,7 @@ fn rays_follow_each_formats_own_definition() {
             close(rays.directions[k], d, "blender direction");
             close(
                 rays.origins[k],
-                [m(0, 3), m(1, 3), m(2, 3)],
+                Vec3::new(m(0, 3), m(1, 3), m(2, 3)),
                 "blender origin",
             );
         }
@@ -257,7 +269,7 @@ fn rays_follow_each_formats_own_definition() {
             );
             close(
                 rays.origins[k],
-                scene.to_scene.apply_point([m(0, 3), m(1, 3), m(2, 3)]),
+                scene.to_scene.apply_point(Vec3::new(m(0, 3), m(1, 3), m(2, 3))),
                 "llff origin",
             );
         }
@@ -327,11 +339,11 @@ fn llff_spiral_orbits_and_looks_at_the_focus_point() {
     let focal = 1.0 / (0.25 / (0.9 * lo) + 0.75 / (5.0 * hi));
     let cams: Vec<Camera> = scene.views.iter().map(|v| v.camera.clone()).collect();
     let avg = average_pose(&cams);
-    let focus = [
+    let focus = Vec3::new(
         avg[0][3] - focal * avg[0][2],
         avg[1][3] - focal * avg[1][2],
         avg[2][3] - focal * avg[2][2],
-    ];
+    );
     let mut max_offset = 0.0f32;
     for cam in &path {
         let to_focus = sub(focus, cam.origin());
@@ -339,18 +351,18 @@ fn llff_spiral_orbits_and_looks_at_the_focus_point() {
         assert!(along > 0.0);
         let miss = norm(sub(
             to_focus,
-            [
+            Vec3::new(
                 cam.forward()[0] * along,
                 cam.forward()[1] * along,
                 cam.forward()[2] * along,
-            ],
+            ),
         ));
         assert!(
             miss < 1e-3 * focal,
             "spiral camera misses the focus by {miss}"
         );
-        assert!(orthonormality_error(&cam.rotation()) < 1e-5);
-        max_offset = max_offset.max(dist(cam.origin(), [avg[0][3], avg[1][3], avg[2][3]]));
+        assert!(orthonormality_error(cam.rotation()) < 1e-5);
+        max_offset = max_offset.max(dist(cam.origin(), Vec3::new(avg[0][3], avg[1][3], avg[2][3])));
     }
     // It moves, within the spread of the real cameras.
     let spread = cams.iter().map(|c| norm(c.origin())).fold(0.0, f32::max);
@@ -382,11 +394,11 @@ fn dtu_rays_hit_rendered_surface_in_the_unit_sphere_frame() {
     // The unit-sphere frame, computed here from the scale_mat the writer used (×30, shifted).
     let s = synth.scene.to_world;
     let unit = |p: Vec3| {
-        [
+        Vec3::new(
             (p[0] - s.translation[0]) / s.scale,
             (p[1] - s.translation[1]) / s.scale,
             (p[2] - s.translation[2]) / s.scale,
-        ]
+        )
     };
     assert_rays_hit_surface(&scene, &synth, unit, 1.0 / s.scale, 1e-3);
     // Object points lie within each ray's unit-sphere interval.
@@ -549,7 +561,7 @@ fn turntable_and_interpolation_paths() {
             "radius {}",
             norm(cam.origin())
         );
-        let to_centre = sub([0.0; 3], cam.origin());
+        let to_centre = Vec3::ZERO - cam.origin();
         assert!(dot(cam.forward(), to_centre) / norm(to_centre) > 0.99999);
     }
     assert!(
@@ -567,7 +579,7 @@ fn turntable_and_interpolation_paths() {
     assert_eq!(inter[0].c2w, keys[0].c2w);
     assert_eq!(inter[10].c2w, keys[2].c2w);
     for c in &inter {
-        assert!(orthonormality_error(&c.rotation()) < 1e-5);
+        assert!(orthonormality_error(c.rotation()) < 1e-5);
     }
     let mid = &inter[5];
     assert!(dist(mid.origin(), keys[1].origin()) < 1e-4);

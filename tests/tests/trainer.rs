@@ -1,13 +1,13 @@
 //! The shared trainer on a toy model: NaN guard with the last good checkpoint kept, frozen
-//! groups, per-group learning rates, phases.
+//! groups, per-group learning rates, phases, and configurations refused before a step runs.
 
 use anyhow::Result;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::Gradients;
 use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
-use ins_core::train::groups::{OptimGroups, Optimizable};
-use ins_core::train::{LossTerms, Phase, Task, TrainOptions, Trainer};
+use ins_core::train::{
+    GroupSpec, LossTerms, Optimizable, Phase, StepContext, Task, TrainError, TrainOptions, Trainer,
+};
 use ins_tests::values;
 
 #[derive(Module, Debug)]
@@ -17,14 +17,9 @@ struct Toy {
 }
 
 impl Optimizable for Toy {
-    fn group_names() -> &'static [&'static str] {
-        &["a", "b"]
-    }
-    fn optimize(self, grads: &mut Gradients, lr: f64, groups: &mut OptimGroups) -> Self {
-        Self {
-            a: groups.step("a", self.a, grads, lr),
-            b: groups.step("b", self.b, grads, lr),
-        }
+    fn groups(&self) -> &'static [GroupSpec] {
+        const GROUPS: &[GroupSpec] = &[GroupSpec::new("a", &["a"]), GroupSpec::new("b", &["b"])];
+        GROUPS
     }
 }
 
@@ -36,6 +31,11 @@ fn toy(device: &Device) -> Toy {
     }
 }
 
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Fit {
+    Regress,
+}
+
 /// Regression of y = x0 − x1; turns the loss into NaN from `nan_from` on.
 struct ToyTask {
     nan_from: usize,
@@ -44,13 +44,11 @@ struct ToyTask {
 
 impl Task for ToyTask {
     type Model = Toy;
-    fn losses(
-        &mut self,
-        model: &Toy,
-        _phase: &Phase,
-        _step: usize,
-        _seed: u64,
-    ) -> Result<LossTerms> {
+    type Objective = Fit;
+    fn terms(&self, _: Fit) -> &'static [&'static str] {
+        &["mse"]
+    }
+    fn losses(&mut self, model: &Toy, _step: &StepContext<Fit>) -> Result<LossTerms> {
         let device = model.a.weight.val().device();
         let x =
             Tensor::<2>::from_floats([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [2.0, -1.0]], &device);
@@ -64,6 +62,13 @@ impl Task for ToyTask {
     }
 }
 
+fn task() -> ToyTask {
+    ToyTask {
+        nan_from: usize::MAX,
+        global: 0,
+    }
+}
+
 fn quiet(dir: &std::path::Path) -> TrainOptions {
     let mut o = TrainOptions::new(dir);
     o.quiet = true;
@@ -72,49 +77,48 @@ fn quiet(dir: &std::path::Path) -> TrainOptions {
     o
 }
 
+fn fit(steps: usize, lr: f64) -> Phase<Fit> {
+    Phase::new("fit", Fit::Regress, steps, lr)
+}
+
 #[test]
 fn training_lowers_the_loss() {
     let device = Device::flex().autodiff();
     let dir = tempfile::tempdir().unwrap();
-    let t = Trainer::new(vec![Phase::new("fit", 600, 2e-2)], quiet(dir.path()));
-    let out = t
-        .run(
-            &mut ToyTask {
-                nan_from: usize::MAX,
-                global: 0,
-            },
-            toy(&device),
-        )
-        .unwrap();
+    let t = Trainer::new(vec![fit(600, 2e-2)], quiet(dir.path()));
+    let out = t.run(&mut task(), toy(&device)).unwrap();
     assert!(out.last["mse"] < 1e-3, "final loss {}", out.last["mse"]);
+    assert!(dir.path().join("loss_curve.png").exists());
 }
 
 #[test]
-fn nan_stops_with_a_clear_message_and_keeps_the_last_good_checkpoint() {
+fn nan_stops_with_a_typed_error_and_keeps_the_last_good_checkpoint() {
     let device = Device::flex().autodiff();
     let dir = tempfile::tempdir().unwrap();
-    let t = Trainer::new(vec![Phase::new("fit", 20, 1e-2)], quiet(dir.path()));
-    let err = t
-        .run(
-            &mut ToyTask {
-                nan_from: 5,
-                global: 0,
-            },
-            toy(&device),
-        )
-        .err()
-        .expect("NaN must stop the run");
-    let msg = format!("{err:#}");
-    assert!(msg.contains("diverged") && msg.contains("step 5"), "{msg}");
-    assert!(
-        msg.contains("step-00000004"),
-        "message should name the last good checkpoint: {msg}"
-    );
+    let t = Trainer::new(vec![fit(20, 1e-2)], quiet(dir.path()));
+    let mut nan = ToyTask {
+        nan_from: 5,
+        global: 0,
+    };
+    let err = t.run(&mut nan, toy(&device)).err().expect("NaN must stop the run");
+    let TrainError::Diverged {
+        term,
+        step,
+        checkpoint,
+        ..
+    } = &err
+    else {
+        panic!("expected Diverged, got {err}");
+    };
+    assert_eq!((term.as_str(), *step), ("mse", 5));
+    let checkpoint = checkpoint.clone().expect("a checkpoint was written at step 4");
+    assert!(checkpoint.ends_with("step-00000004-000"), "{}", checkpoint.display());
+    let msg = err.to_string();
+    assert!(msg.contains("diverged") && msg.contains("step-00000004-000"), "{msg}");
     // The checkpoint it names is complete and loads.
-    let store = CheckpointStore::new(dir.path().join("checkpoints"), 2);
-    let ckpt = store.load_latest().unwrap().unwrap();
+    let ckpt = CheckpointStore::load_dir(&checkpoint).unwrap();
     assert_eq!(ckpt.step, 4);
-    let m = load_module_bytes(toy(&device), ckpt.model, store.dir()).unwrap();
+    let m = load_module_bytes(toy(&device), ckpt.model, &checkpoint).unwrap();
     assert!(values(m.a.weight.val()).iter().all(|v| v.is_finite()));
 }
 
@@ -125,51 +129,66 @@ fn frozen_group_keeps_its_parameters_and_lr_multiplier_scales_steps() {
     let start = toy(&device);
     let a0 = values(start.a.weight.val());
     let b0 = values(start.b.weight.val());
-    let t = Trainer::new(
-        vec![Phase::new("fit", 5, 1e-2).freeze("a")],
-        quiet(dir.path()),
-    );
-    let out = t
-        .run(
-            &mut ToyTask {
-                nan_from: usize::MAX,
-                global: 0,
-            },
-            start,
-        )
-        .unwrap();
+    let t = Trainer::new(vec![fit(5, 1e-2).freeze("a")], quiet(dir.path()));
+    let out = t.run(&mut task(), start).unwrap();
     assert_eq!(values(out.model.a.weight.val()), a0, "frozen group moved");
-    assert_ne!(
-        values(out.model.b.weight.val()),
-        b0,
-        "trained group did not move"
-    );
+    assert_ne!(values(out.model.b.weight.val()), b0, "trained group did not move");
 
-    // Adam moves each parameter by about lr per step at first: with a multiplier of 0.1 the
-    // first step moves `a` ten times less than `b`'s scale.
+    // Adam moves each parameter by about lr on its first step: with a multiplier of 0.1 the
+    // first step moves `a` by 1e-3.
     let dir2 = tempfile::tempdir().unwrap();
     let start = toy(&device);
     let a0 = values(start.a.weight.val());
-    let t = Trainer::new(
-        vec![Phase::new("fit", 1, 1e-2).lr_mult("a", 0.1)],
-        quiet(dir2.path()),
-    );
-    let out = t
-        .run(
-            &mut ToyTask {
-                nan_from: usize::MAX,
-                global: 0,
-            },
-            start,
-        )
+    let b0 = values(start.b.weight.val());
+    let t = Trainer::new(vec![fit(1, 1e-2).lr_mult("a", 0.1)], quiet(dir2.path()));
+    let out = t.run(&mut task(), start).unwrap();
+    let moved = |now: Vec<f32>, before: &[f32]| {
+        now.iter()
+            .zip(before)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max)
+    };
+    let ma = moved(values(out.model.a.weight.val()), &a0);
+    let mb = moved(values(out.model.b.weight.val()), &b0);
+    assert!((ma - 1e-3).abs() < 2e-4, "first Adam step with lr 1e-2 × 0.1 moved {ma}");
+    assert!((mb - 1e-2).abs() < 2e-3, "first Adam step with lr 1e-2 moved {mb}");
+}
+
+#[test]
+fn misconfigured_phases_are_refused_before_any_step() {
+    let device = Device::flex().autodiff();
+    let dir = tempfile::tempdir().unwrap();
+    let run = |phase: Phase<Fit>| {
+        Trainer::new(vec![phase], quiet(dir.path()))
+            .run(&mut task(), toy(&device))
+            .err()
+            .expect("must be refused")
+    };
+    let e = run(fit(3, 1e-2).freeze("c"));
+    assert!(matches!(&e, TrainError::UnknownGroup { group, .. } if group == "c"), "{e}");
+    assert!(e.to_string().contains("groups: a, b"), "{e}");
+    let e = run(fit(3, 1e-2).weight("msee", 1.0));
+    assert!(matches!(&e, TrainError::UnknownTerm { term, .. } if term == "msee"), "{e}");
+    let e = run(fit(3, 1e-2).weight("mse", 0.0));
+    assert!(matches!(&e, TrainError::NothingToMinimise { .. }), "{e}");
+    // Nothing was written: the folder holds no run.
+    assert!(!dir.path().join("checkpoints").exists());
+}
+
+#[test]
+fn a_second_run_into_the_same_folder_is_refused_and_resume_needs_a_checkpoint() {
+    let device = Device::flex().autodiff();
+    let dir = tempfile::tempdir().unwrap();
+    let t = Trainer::new(vec![fit(3, 1e-2)], quiet(dir.path()));
+    t.run(&mut task(), toy(&device)).unwrap();
+    let e = t.run(&mut task(), toy(&device)).err().unwrap();
+    assert!(matches!(e, TrainError::RunExists { .. }), "{e}");
+    let empty = tempfile::tempdir().unwrap();
+    let mut o = quiet(empty.path());
+    o.resume = true;
+    let e = Trainer::new(vec![fit(3, 1e-2)], o)
+        .run(&mut task(), toy(&device))
+        .err()
         .unwrap();
-    let moved = values(out.model.a.weight.val())
-        .iter()
-        .zip(&a0)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0f32, f32::max);
-    assert!(
-        (moved - 1e-3).abs() < 2e-4,
-        "first Adam step with lr 1e-2 × 0.1 moved {moved}"
-    );
+    assert!(matches!(e, TrainError::NothingToResume { .. }), "{e}");
 }

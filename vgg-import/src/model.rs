@@ -151,3 +151,26 @@ impl Vgg16Features {
         Self { convs }.no_grad()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    #[test]
+    fn gradients_reach_the_input_and_never_the_frozen_weights() {
+        let d = Device::flex().autodiff();
+        d.seed(8);
+        let vgg = Vgg16Features::random(&d);
+        let x = Tensor::<4>::random([1, 3, 16, 16], Distribution::Default, &d).require_grad();
+        let f = vgg.forward(x.clone());
+        let loss = f.relu1_2.sum() + f.relu4_3.sum();
+        let grads = loss.backward();
+        assert!(x.grad(&grads).is_some(), "no gradient reached the input");
+        for (i, c) in vgg.convs.iter().enumerate() {
+            assert!(!c.weight.val().is_require_grad(), "conv {i} weight requires grad");
+            assert!(c.weight.val().grad(&grads).is_none(), "conv {i} weight got a gradient");
+            assert!(c.bias.val().grad(&grads).is_none(), "conv {i} bias got a gradient");
+        }
+    }
+}

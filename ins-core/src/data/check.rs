@@ -4,9 +4,7 @@
 use serde::Serialize;
 
 use super::scene::{Scene, SceneFormat, Split};
-use crate::render::geometry::{
-    Bounds, add, dot, norm, normalize, orthonormality_error, scale, sub,
-};
+use crate::render::geometry::{Bounds, Vec3, orthonormality_error};
 
 /// What a scene holds.
 #[derive(Clone, Debug, Serialize)]
@@ -119,7 +117,7 @@ pub fn summarize(scene: &Scene) -> Summary {
     let dists: Vec<f32> = scene
         .views
         .iter()
-        .map(|v| norm(sub(v.camera.origin(), c)))
+        .map(|v| (v.camera.origin() - c).length())
         .collect();
     let masked: Vec<f32> = scene
         .views
@@ -183,7 +181,7 @@ fn check(name: &str, passed: usize, total: usize, failures: &[String]) -> Check 
 fn rotations(scene: &Scene) -> Check {
     let mut fails = Vec::new();
     for (i, v) in scene.views.iter().enumerate() {
-        let e = orthonormality_error(&v.camera.rotation());
+        let e = orthonormality_error(v.camera.rotation());
         if e > 1e-3 {
             fails.push(format!("view {i}: |RᵀR − I| = {e:.2e}"));
         }
@@ -284,16 +282,16 @@ fn center_in_masks(scene: &Scene) -> Check {
 }
 
 fn same_direction(scene: &Scene) -> Check {
-    let mean = normalize(
-        scene
-            .views
-            .iter()
-            .fold([0.0; 3], |a, v| add(a, v.camera.forward())),
-    );
+    let mean = scene
+        .views
+        .iter()
+        .map(|v| v.camera.forward())
+        .sum::<Vec3>()
+        .normalize_or_zero();
     let cos_max = 30f32.to_radians().cos();
     let mut fails = Vec::new();
     for (i, v) in scene.views.iter().enumerate() {
-        let c = dot(v.camera.forward(), mean);
+        let c = v.camera.forward().dot(mean);
         if c < cos_max {
             fails.push(format!(
                 "view {i}: {:.1}° off the mean",
@@ -315,8 +313,8 @@ fn near_points_in_frame(scene: &Scene) -> Check {
     for (i, vi) in scene.views.iter().enumerate() {
         let near = vi.depth_range.map_or(scene.near, |r| r.0);
         let (o, d) = vi.camera.ray(vi.camera.cx, vi.camera.cy);
-        let z = dot(d, vi.camera.forward()).max(1e-6);
-        let p = add(o, scale(d, near / z));
+        let z = d.dot(vi.camera.forward()).max(1e-6);
+        let p = o + d * (near / z);
         for (j, vj) in scene.views.iter().enumerate() {
             total += 1;
             if !vj.camera.project(p).is_some_and(|q| vj.camera.in_frame(q)) {

@@ -104,11 +104,7 @@ fn project_segment(cam: &Camera, a: Vec3, b: Vec3) -> Option<([f32; 2], [f32; 2]
     }
     let clip = |p: Vec3, q: Vec3, zp: f32, zq: f32| -> Vec3 {
         let t = (eps - zp) / (zq - zp);
-        [
-            p[0] + t * (q[0] - p[0]),
-            p[1] + t * (q[1] - p[1]),
-            p[2] + t * (q[2] - p[2]),
-        ]
+        p + t * (q - p)
     };
     let ca2 = if za < eps { clip(ca, cb, za, zb) } else { ca };
     let cb2 = if zb < eps { clip(cb, ca, zb, za) } else { cb };

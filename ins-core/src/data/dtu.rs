@@ -282,7 +282,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     }
     let dists: Vec<f32> = views
         .iter()
-        .map(|v| crate::render::geometry::norm(v.camera.origin()))
+        .map(|v| v.camera.origin().length())
         .collect();
     let near = dists.iter().fold(f32::INFINITY, |a, &d| a.min(d)) - 1.0;
     let far = dists.iter().fold(0.0f32, |a, &d| a.max(d)) + 1.0;
@@ -297,7 +297,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         near: near.max(0.0),
         far,
         bounds: Bounds::Sphere {
-            center: [0.0; 3],
+            center: crate::render::geometry::Vec3::ZERO,
             radius: 1.0,
         },
         per_ray_range: true,

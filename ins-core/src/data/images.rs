@@ -4,8 +4,8 @@
 //! (800×800) take 256 MB as RGB + mask bytes instead of 1 GB as f32.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rayon::prelude::*;
 
 use super::DataError;
 
@@ -187,15 +187,31 @@ impl Decoded {
     }
 }
 
-/// Decodes an image file (PNG or JPEG; format sniffed from the content), keeping alpha.
-pub fn read_image(path: &Path) -> Result<Decoded, DataError> {
-    let reader = ::image::ImageReader::open(path).map_err(|e| DataError::io(path, e))?;
-    let reader = reader
+/// The largest decoded image accepted: 16384 px per side and 512 MiB of pixels, so a file whose
+/// header lies about its size is an error, not an allocation.
+pub const MAX_SIDE: u32 = 16384;
+/// See [`MAX_SIDE`].
+pub const MAX_DECODED_BYTES: u64 = 512 << 20;
+
+/// Decodes an image file (format sniffed from the content) within the limits above.
+fn decode(path: &Path) -> Result<::image::DynamicImage, DataError> {
+    let mut reader = ::image::ImageReader::open(path)
+        .map_err(|e| DataError::io(path, e))?
         .with_guessed_format()
         .map_err(|e| DataError::io(path, e))?;
-    let img = reader
+    let mut limits = ::image::Limits::default();
+    limits.max_image_width = Some(MAX_SIDE);
+    limits.max_image_height = Some(MAX_SIDE);
+    limits.max_alloc = Some(MAX_DECODED_BYTES);
+    reader.limits(limits);
+    reader
         .decode()
-        .map_err(|e| DataError::image(path, e.to_string()))?;
+        .map_err(|e| DataError::image(path, e.to_string()))
+}
+
+/// Decodes an image file (PNG or JPEG; format sniffed from the content), keeping alpha.
+pub fn read_image(path: &Path) -> Result<Decoded, DataError> {
+    let img = decode(path)?;
     let (w, h) = (img.width(), img.height());
     if img.color().has_alpha() {
         let rgba = img.into_rgba8().into_raw();
@@ -231,13 +247,7 @@ pub fn read_image(path: &Path) -> Result<Decoded, DataError> {
 
 /// Decodes a mask file: its grey level (0/255 masks stay 0/255).
 pub fn read_mask(path: &Path) -> Result<Mask, DataError> {
-    let reader = ::image::ImageReader::open(path).map_err(|e| DataError::io(path, e))?;
-    let reader = reader
-        .with_guessed_format()
-        .map_err(|e| DataError::io(path, e))?;
-    let img = reader
-        .decode()
-        .map_err(|e| DataError::image(path, e.to_string()))?;
+    let img = decode(path)?;
     let (w, h) = (img.width(), img.height());
     Ok(Mask {
         width: w,
@@ -287,54 +297,13 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>, DataError> {
     Ok(files)
 }
 
-/// Applies `f` to every path on all cores (`std::thread::scope`, work shared through an
-/// atomic counter), keeping the order; the first error (in path order) wins. Image decoding
-/// dominates loading time, and this divides it by the number of cores.
+/// Applies `f` to every path on all cores (rayon), keeping the order; the first error in path
+/// order wins, so the message does not depend on scheduling. Image decoding dominates loading
+/// time, and this divides it by the number of cores.
 pub fn parallel_map<T: Send>(
     paths: &[PathBuf],
     f: impl Fn(&Path) -> Result<T, DataError> + Sync,
 ) -> Result<Vec<T>, DataError> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(paths.len())
-        .max(1);
-    let next = AtomicUsize::new(0);
-    let slots: Vec<Mutex<Option<Result<T, DataError>>>> =
-        paths.iter().map(|_| Mutex::new(None)).collect();
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    if i >= paths.len() {
-                        break;
-                    }
-                    let r = f(&paths[i]);
-                    let failed = r.is_err();
-                    if let Ok(mut slot) = slots[i].lock() {
-                        *slot = Some(r);
-                    }
-                    if failed {
-                        // Stop handing out work; earlier items still finish.
-                        next.store(paths.len(), Ordering::Relaxed);
-                    }
-                }
-            });
-        }
-    });
-    let mut out = Vec::with_capacity(paths.len());
-    for (i, slot) in slots.into_iter().enumerate() {
-        match slot.into_inner().ok().flatten() {
-            Some(Ok(v)) => out.push(v),
-            Some(Err(e)) => return Err(e),
-            None => {
-                // Skipped after an earlier failure at a later index: find and report that one.
-                return Err(DataError::invalid(
-                    &paths[i],
-                    "not read: loading stopped after an error in another file",
-                ));
-            }
-        }
-    }
-    Ok(out)
+    let results: Vec<Result<T, DataError>> = paths.par_iter().map(|p| f(p)).collect();
+    results.into_iter().collect()
 }

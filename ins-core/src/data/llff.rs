@@ -14,7 +14,8 @@ use super::images::{list_images, parallel_map, read_image};
 use super::npy::read_npy;
 use super::scene::{LoadOptions, Scene, SceneFormat, View};
 use crate::render::camera::Camera;
-use crate::render::geometry::{Bounds, Similarity};
+use crate::render::geometry::{Bounds, Similarity, Vec3};
+use glam::DVec3;
 
 /// Reads an LLFF scene from `dir`.
 pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
@@ -155,10 +156,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     let bounds = frustum_bounds(&views);
     let to_scene = Similarity {
         scale: sc as f32,
-        rotation: rot_t.map(|r| r.map(|v| v as f32)),
-        translation: std::array::from_fn(|r| {
+        rotation: crate::render::geometry::mat3_from_rows(rot_t.map(|r| r.map(|v| v as f32))),
+        translation: Vec3::from_array(std::array::from_fn(|r| {
             -(0..3).map(|k| rot_t[r][k] * c[k]).sum::<f64>() as f32
-        }),
+        })),
     };
     Ok(Scene {
         name: super::folder_name(dir),
@@ -218,19 +219,13 @@ fn image_folder(dir: &Path, factor: u32) -> Result<(PathBuf, u32), DataError> {
 /// NeRF's `poses_avg`: mean centre, summed back and up axes, re-orthonormalized.
 fn average_pose(poses: &[[[f64; 4]; 3]]) -> [[f64; 4]; 3] {
     let n = poses.len() as f64;
-    let mut center = [0.0; 3];
-    let mut back = [0.0; 3];
-    let mut up = [0.0; 3];
-    for p in poses {
-        for r in 0..3 {
-            center[r] += p[r][3] / n;
-            back[r] += p[r][2];
-            up[r] += p[r][1];
-        }
-    }
-    let z = normalize64(back);
-    let x = normalize64(cross64(up, z));
-    let y = normalize64(cross64(z, x));
+    let col = |p: &[[f64; 4]; 3], c: usize| DVec3::new(p[0][c], p[1][c], p[2][c]);
+    let center = poses.iter().map(|p| col(p, 3)).sum::<DVec3>() / n;
+    let back = poses.iter().map(|p| col(p, 2)).sum::<DVec3>();
+    let up = poses.iter().map(|p| col(p, 1)).sum::<DVec3>();
+    let z = back.normalize_or_zero();
+    let x = up.cross(z).normalize_or_zero();
+    let y = z.cross(x).normalize_or_zero();
     let mut out = [[0.0; 4]; 3];
     for r in 0..3 {
         out[r] = [x[r], y[r], z[r], center[r]];
@@ -238,24 +233,11 @@ fn average_pose(poses: &[[[f64; 4]; 3]]) -> [[f64; 4]; 3] {
     out
 }
 
-fn normalize64(v: [f64; 3]) -> [f64; 3] {
-    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    if n > 0.0 { v.map(|x| x / n) } else { v }
-}
-
-fn cross64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
 /// Box around every view's frustum between its near and far depth bounds: the region the
 /// views actually see.
 fn frustum_bounds(views: &[View]) -> Bounds {
-    let mut min = [f32::INFINITY; 3];
-    let mut max = [f32::NEG_INFINITY; 3];
+    let mut min = Vec3::INFINITY;
+    let mut max = Vec3::NEG_INFINITY;
     for v in views {
         let c = &v.camera;
         let (near, far) = v.depth_range.unwrap_or((1.0, 1.0));
@@ -266,17 +248,9 @@ fn frustum_bounds(views: &[View]) -> Bounds {
                 (0.0, c.height as f32),
                 (c.width as f32, c.height as f32),
             ] {
-                let d = c.direction_camera(x, y);
-                let rot = c.rotation();
-                let w = crate::render::geometry::mat3_mul_vec(&rot, d);
-                let p = crate::render::geometry::add(
-                    c.origin(),
-                    crate::render::geometry::scale(w, depth),
-                );
-                for k in 0..3 {
-                    min[k] = min[k].min(p[k]);
-                    max[k] = max[k].max(p[k]);
-                }
+                let p = c.origin() + c.rotation() * c.direction_camera(x, y) * depth;
+                min = min.min(p);
+                max = max.max(p);
             }
         }
     }

@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use super::images::{Image, Mask};
 use crate::render::camera::Camera;
-use crate::render::geometry::{Bounds, Similarity, Vec3, dot, norm, sub};
+use crate::render::geometry::{Bounds, Similarity, Vec3};
 
 /// The on-disk format a scene was read from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -197,9 +197,9 @@ impl Scene {
         let c = self.bounds.center();
         let r = match self.bounds {
             Bounds::Sphere { radius, .. } => radius,
-            Bounds::Aabb { min, max } => 0.5 * norm(sub(max, min)),
+            Bounds::Aabb { min, max } => 0.5 * (max - min).length(),
         };
-        let mid = dot(sub(c, o), d);
+        let mid = (c - o).dot(d);
         ((mid - r).max(0.0), (mid + r).max(0.0))
     }
 

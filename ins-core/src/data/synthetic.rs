@@ -15,9 +15,7 @@ use super::images::{to_u8, write_png};
 use super::npy::{write_npy, write_npz};
 use super::scene::{SceneFormat, Split};
 use crate::render::camera::{Camera, flip_yz, pose_look_at};
-use crate::render::geometry::{
-    Mat3, Similarity, Vec3, add, dot, mat3_mul, mat3_mul_vec, normalize, scale, sub, transpose,
-};
+use crate::render::geometry::{Mat3, Similarity, Vec3, mat3_rows};
 
 /// A primitive, in the scene's local frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -141,12 +139,12 @@ impl AnalyticScene {
     /// Spheres and boxes inside the unit ball (radius ≤ 0.95), on a ground plane `z = −0.55`
     /// when `ground` is true; local z is up.
     pub fn tabletop(ground: bool) -> Self {
-        let red = [0.85, 0.2, 0.15];
-        let white = [0.95, 0.95, 0.9];
+        let red = Vec3::new(0.85, 0.2, 0.15);
+        let white = Vec3::new(0.95, 0.95, 0.9);
         let mut objects = vec![
             Object {
                 shape: Shape::Sphere {
-                    center: [0.0, 0.0, 0.0],
+                    center: Vec3::new(0.0, 0.0, 0.0),
                     radius: 0.45,
                 },
                 texture: Texture::Checker {
@@ -158,34 +156,34 @@ impl AnalyticScene {
             },
             Object {
                 shape: Shape::Box {
-                    min: [0.25, 0.15, -0.55],
-                    max: [0.6, 0.5, -0.2],
+                    min: Vec3::new(0.25, 0.15, -0.55),
+                    max: Vec3::new(0.6, 0.5, -0.2),
                 },
                 texture: Texture::Checker {
-                    a: [0.1, 0.6, 0.2],
-                    b: [0.9, 0.8, 0.2],
+                    a: Vec3::new(0.1, 0.6, 0.2),
+                    b: Vec3::new(0.9, 0.8, 0.2),
                     size: 0.1,
                 },
                 foreground: true,
             },
             Object {
                 shape: Shape::Sphere {
-                    center: [-0.45, 0.35, -0.3],
+                    center: Vec3::new(-0.45, 0.35, -0.3),
                     radius: 0.2,
                 },
-                texture: Texture::Solid([0.15, 0.3, 0.9]),
+                texture: Texture::Solid(Vec3::new(0.15, 0.3, 0.9)),
                 foreground: true,
             },
         ];
         if ground {
             objects.push(Object {
                 shape: Shape::Plane {
-                    point: [0.0, 0.0, -0.55],
-                    normal: [0.0, 0.0, 1.0],
+                    point: Vec3::new(0.0, 0.0, -0.55),
+                    normal: Vec3::new(0.0, 0.0, 1.0),
                 },
                 texture: Texture::Checker {
-                    a: [0.35, 0.3, 0.25],
-                    b: [0.6, 0.55, 0.5],
+                    a: Vec3::new(0.35, 0.3, 0.25),
+                    b: Vec3::new(0.6, 0.55, 0.5),
                     size: 0.25,
                 },
                 foreground: false,
@@ -203,56 +201,56 @@ impl AnalyticScene {
         let objects = vec![
             Object {
                 shape: Shape::Sphere {
-                    center: [0.0, 0.0, -4.0],
+                    center: Vec3::new(0.0, 0.0, -4.0),
                     radius: 0.8,
                 },
                 texture: Texture::Checker {
-                    a: [0.85, 0.2, 0.15],
-                    b: [0.95, 0.95, 0.9],
+                    a: Vec3::new(0.85, 0.2, 0.15),
+                    b: Vec3::new(0.95, 0.95, 0.9),
                     size: 0.25,
                 },
                 foreground: true,
             },
             Object {
                 shape: Shape::Box {
-                    min: [-1.8, -1.5, -5.5],
-                    max: [-0.8, 0.2, -4.5],
+                    min: Vec3::new(-1.8, -1.5, -5.5),
+                    max: Vec3::new(-0.8, 0.2, -4.5),
                 },
                 texture: Texture::Checker {
-                    a: [0.1, 0.6, 0.2],
-                    b: [0.9, 0.8, 0.2],
+                    a: Vec3::new(0.1, 0.6, 0.2),
+                    b: Vec3::new(0.9, 0.8, 0.2),
                     size: 0.3,
                 },
                 foreground: true,
             },
             Object {
                 shape: Shape::Sphere {
-                    center: [1.3, 0.6, -3.2],
+                    center: Vec3::new(1.3, 0.6, -3.2),
                     radius: 0.5,
                 },
-                texture: Texture::Solid([0.15, 0.3, 0.9]),
+                texture: Texture::Solid(Vec3::new(0.15, 0.3, 0.9)),
                 foreground: true,
             },
             Object {
                 shape: Shape::Plane {
-                    point: [0.0, -1.5, 0.0],
-                    normal: [0.0, 1.0, 0.0],
+                    point: Vec3::new(0.0, -1.5, 0.0),
+                    normal: Vec3::new(0.0, 1.0, 0.0),
                 },
                 texture: Texture::Checker {
-                    a: [0.35, 0.3, 0.25],
-                    b: [0.6, 0.55, 0.5],
+                    a: Vec3::new(0.35, 0.3, 0.25),
+                    b: Vec3::new(0.6, 0.55, 0.5),
                     size: 0.5,
                 },
                 foreground: false,
             },
             Object {
                 shape: Shape::Plane {
-                    point: [0.0, 0.0, -8.0],
-                    normal: [0.0, 0.0, 1.0],
+                    point: Vec3::new(0.0, 0.0, -8.0),
+                    normal: Vec3::new(0.0, 0.0, 1.0),
                 },
                 texture: Texture::Checker {
-                    a: [0.5, 0.6, 0.8],
-                    b: [0.8, 0.85, 0.95],
+                    a: Vec3::new(0.5, 0.6, 0.8),
+                    b: Vec3::new(0.8, 0.85, 0.95),
                     size: 0.7,
                 },
                 foreground: false,
@@ -267,9 +265,9 @@ impl AnalyticScene {
     /// First hit of the world ray `o + t·d` (unit `d`, `t > 0`).
     pub fn trace(&self, o: Vec3, d: Vec3) -> Option<Hit> {
         let s = &self.to_world;
-        let rt = transpose(&s.rotation);
-        let ol = scale(mat3_mul_vec(&rt, sub(o, s.translation)), 1.0 / s.scale);
-        let dl = mat3_mul_vec(&rt, d);
+        let rt = s.rotation.transpose();
+        let ol = rt * (o - s.translation) / s.scale;
+        let dl = rt * d;
         let mut best: Option<(f32, usize, Vec3)> = None;
         for (i, obj) in self.objects.iter().enumerate() {
             if let Some((t, n)) = intersect(&obj.shape, ol, dl)
@@ -279,10 +277,10 @@ impl AnalyticScene {
             }
         }
         let (tl, i, n) = best?;
-        let pl = add(ol, scale(dl, tl));
-        let n = if dot(n, dl) > 0.0 { scale(n, -1.0) } else { n };
-        let light = normalize([0.3, 0.5, 0.8]);
-        let shade = 0.45 + 0.55 * dot(n, light).max(0.0);
+        let pl = ol + dl * tl;
+        let n = if n.dot(dl) > 0.0 { -n } else { n };
+        let light = Vec3::new(0.3, 0.5, 0.8).normalize();
+        let shade = 0.45 + 0.55 * n.dot(light).max(0.0);
         let base = match self.objects[i].texture {
             Texture::Solid(c) => c,
             Texture::Checker { a, b, size } => {
@@ -294,7 +292,7 @@ impl AnalyticScene {
             t: tl * s.scale,
             point: s.apply_point(pl),
             object: i,
-            rgb: scale(base, shade),
+            rgb: base * shade,
         })
     }
 
@@ -314,7 +312,7 @@ impl AnalyticScene {
                 let i = (v * camera.width + u) as usize;
                 let (o, d) = camera.pixel_ray(u, v);
                 if let Some(h) = self.trace(o, d) {
-                    r.rgb[i * 3..i * 3 + 3].copy_from_slice(&h.rgb);
+                    r.rgb[i * 3..i * 3 + 3].copy_from_slice(&h.rgb.to_array());
                     r.depth[i] = h.t;
                     r.object[i] = Some(h.object);
                     r.mask[i] = self.objects[h.object].foreground;
@@ -330,23 +328,23 @@ fn intersect(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f32, Vec3)> {
     const EPS: f32 = 1e-5;
     match *shape {
         Shape::Sphere { center, radius } => {
-            let oc = sub(o, center);
-            let b = dot(oc, d);
-            let c = dot(oc, oc) - radius * radius;
-            let disc = b * b - dot(d, d) * c;
+            let oc = o - center;
+            let b = oc.dot(d);
+            let c = oc.dot(oc) - radius * radius;
+            let disc = b * b - d.dot(d) * c;
             if disc < 0.0 {
                 return None;
             }
             let s = disc.sqrt();
-            let a = dot(d, d);
+            let a = d.dot(d);
             let t = [(-b - s) / a, (-b + s) / a]
                 .into_iter()
                 .find(|&t| t > EPS)?;
-            Some((t, normalize(sub(add(o, scale(d, t)), center))))
+            Some((t, (o + d * t - center).normalize()))
         }
         Shape::Box { min, max } => {
             let (mut t0, mut t1) = (f32::NEG_INFINITY, f32::INFINITY);
-            let (mut n0, mut n1) = ([0.0; 3], [0.0; 3]);
+            let (mut n0, mut n1) = (Vec3::ZERO, Vec3::ZERO);
             for k in 0..3 {
                 if d[k].abs() < 1e-12 {
                     if o[k] < min[k] || o[k] > max[k] {
@@ -358,12 +356,12 @@ fn intersect(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f32, Vec3)> {
                 let (near, far, sn) = if a < b { (a, b, -1.0) } else { (b, a, 1.0) };
                 if near > t0 {
                     t0 = near;
-                    n0 = [0.0; 3];
+                    n0 = Vec3::ZERO;
                     n0[k] = sn;
                 }
                 if far < t1 {
                     t1 = far;
-                    n1 = [0.0; 3];
+                    n1 = Vec3::ZERO;
                     n1[k] = -sn;
                 }
             }
@@ -379,12 +377,12 @@ fn intersect(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f32, Vec3)> {
             }
         }
         Shape::Plane { point, normal } => {
-            let denom = dot(d, normal);
+            let denom = d.dot(normal);
             if denom.abs() < 1e-9 {
                 return None;
             }
-            let t = dot(sub(point, o), normal) / denom;
-            (t > EPS).then(|| (t, normalize(normal)))
+            let t = (point - o).dot(normal) / denom;
+            (t > EPS).then(|| (t, normal.normalize()))
         }
     }
 }
@@ -461,7 +459,7 @@ fn z_depth_bounds(camera: &Camera, r: &Rendering) -> (f32, f32) {
             let t = r.depth[(v * r.width + u) as usize];
             if t.is_finite() {
                 let (o, d) = camera.pixel_ray(u, v);
-                if let Some(z) = camera.depth_of(add(o, scale(d, t))) {
+                if let Some(z) = camera.depth_of(o + d * t) {
                     lo = lo.min(z);
                     hi = hi.max(z);
                 }
@@ -471,16 +469,9 @@ fn z_depth_bounds(camera: &Camera, r: &Rendering) -> (f32, f32) {
     (lo, hi)
 }
 
-/// Rotation by `angle` radians about unit `axis`.
+/// Rotation by `angle` radians about `axis`.
 fn axis_angle(axis: Vec3, angle: f32) -> Mat3 {
-    let [x, y, z] = normalize(axis);
-    let (s, c) = angle.sin_cos();
-    let t = 1.0 - c;
-    [
-        [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
-        [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
-        [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
-    ]
+    Mat3::from_axis_angle(axis.normalize(), angle)
 }
 
 /// NeRF-synthetic: cameras on a sphere of radius 4 around the origin (z up), looking at it,
@@ -502,12 +493,12 @@ pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, Data
         for i in 0..count {
             let az = (i as f32 + phase) * 2.399_963 + phase;
             let el = (10.0 + 50.0 * ((i as f32 + 0.5 + phase) / count as f32).fract()).to_radians();
-            let eye = scale([el.cos() * az.cos(), el.cos() * az.sin(), el.sin()], 4.0);
+            let eye = Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * 4.0;
             let camera = Camera::from_fov_x(
                 size,
                 size,
                 fov,
-                pose_look_at(eye, [0.0; 3], [0.0, 0.0, 1.0]),
+                pose_look_at(eye, Vec3::ZERO, Vec3::new(0.0, 0.0, 1.0)),
             );
             let render = scene.render(&camera);
             let mut rgba = Vec::with_capacity((size * size * 4) as usize);
@@ -558,8 +549,8 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
     let mut scene = AnalyticScene::forward_facing();
     scene.to_world = Similarity {
         scale: 2.5,
-        rotation: axis_angle([0.3, 1.0, 0.2], 0.5),
-        translation: [3.0, -1.0, 2.0],
+        rotation: axis_angle(Vec3::new(0.3, 1.0, 0.2), 0.5),
+        translation: Vec3::new(3.0, -1.0, 2.0),
     };
     let w = opts.size.max(8);
     let h = (w * 3 / 4).max(6);
@@ -572,16 +563,16 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
     let mut rows = Vec::with_capacity(n * 17);
     for i in 0..n {
         let (gx, gy) = ((i % cols) as f32, (i / cols) as f32);
-        let eye_l = [
+        let eye_l = Vec3::new(
             0.25 * gx - 0.125 * (cols as f32 - 1.0),
             0.2 * gy - 0.1 * ((n / cols) as f32),
             0.03 * (i % 3) as f32,
-        ];
-        let target_l = [0.05 * (i % 2) as f32, 0.0, -5.0];
-        let pose_l = pose_look_at(eye_l, target_l, [0.0, 1.0, 0.0]);
+        );
+        let target_l = Vec3::new(0.05 * (i % 2) as f32, 0.0, -5.0);
+        let pose_l = pose_look_at(eye_l, target_l, Vec3::new(0.0, 1.0, 0.0));
         let s = &scene.to_world;
-        let rot_l = pose_l.map(|r| [r[0], r[1], r[2]]);
-        let rot_w = mat3_mul(&s.rotation, &rot_l);
+        let rot_l = crate::render::geometry::mat3_from_rows(pose_l.map(|r| [r[0], r[1], r[2]]));
+        let rot_w = mat3_rows(s.rotation * rot_l);
         let eye_w = s.apply_point(eye_l);
         let c2w: [[f32; 4]; 3] =
             std::array::from_fn(|r| [rot_w[r][0], rot_w[r][1], rot_w[r][2], eye_w[r]]);
@@ -625,7 +616,7 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
     scene.to_world = Similarity {
         scale: world_scale,
         rotation: Similarity::identity().rotation,
-        translation: shift,
+        translation: Vec3::from(shift),
     };
     let w = opts.size.max(8);
     let h = (w * 3 / 4).max(6);
@@ -647,8 +638,8 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
     for i in 0..n {
         let az = (-60.0 + 150.0 * i as f32 / n as f32).to_radians();
         let el = (25.0 + 20.0 * (i % 3) as f32).to_radians();
-        let eye_l = scale([el.cos() * az.cos(), el.cos() * az.sin(), el.sin()], 2.6);
-        let pose_l = pose_look_at(eye_l, [0.0, 0.0, -0.1], [0.0, 0.0, 1.0]);
+        let eye_l = Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin()) * 2.6;
+        let pose_l = pose_look_at(eye_l, Vec3::new(0.0, 0.0, -0.1), Vec3::new(0.0, 0.0, 1.0));
         let eye_w = scene.to_world.apply_point(eye_l);
         let c2w: [[f32; 4]; 3] =
             std::array::from_fn(|r| [pose_l[r][0], pose_l[r][1], pose_l[r][2], eye_w[r]]);

@@ -1,4 +1,5 @@
-//! Loss terms: Gram-matrix style loss, VGG content loss, pixel MSE and PSNR.
+//! Loss terms: Gram-matrix style loss, VGG content loss, pixel MSE, and the image metrics
+//! (PSNR, SSIM).
 //!
 //! Style: Σ over relu1_2, relu2_2, relu3_3, relu4_3 of mean((G(x) − G(s))²) with
 //! G = F Fᵀ / (C·H·W). Content: mean((relu2_2(x) − relu2_2(c))²).
@@ -6,9 +7,11 @@
 pub mod gram;
 pub mod perceptual;
 pub mod pixel;
+pub mod ssim;
 pub mod weights;
 
 pub use gram::gram;
 pub use perceptual::{StyleTarget, content_loss, style_loss};
 pub use pixel::{mse, psnr};
+pub use ssim::ssim;
 pub use weights::LossWeights;

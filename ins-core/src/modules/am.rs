@@ -57,3 +57,35 @@ impl Amalgamation {
         features * gamma.clone() + mixed * (gamma.neg().add_scalar(1.0))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    #[test]
+    fn starts_as_the_identity_whatever_the_style() {
+        let d = Device::flex();
+        d.seed(6);
+        let am = AmalgamationConfig::new(8, 4).init(&d);
+        let f = Tensor::<2>::random([10, 8], Distribution::Default, &d);
+        for s in 0..3 {
+            let style = Tensor::<2>::random([10, 4], Distribution::Normal(s as f64, 1.0), &d);
+            let out = am.forward(f.clone(), style);
+            let diff = (out - f.clone()).abs().max().into_scalar::<f32>();
+            assert_eq!(diff, 0.0, "AM at initialisation changed the features by {diff}");
+        }
+    }
+
+    #[test]
+    fn gamma_gets_a_gradient_so_stylization_can_leave_the_identity() {
+        let d = Device::flex().autodiff();
+        d.seed(7);
+        let am = AmalgamationConfig::new(8, 4).init(&d);
+        let f = Tensor::<2>::random([10, 8], Distribution::Default, &d);
+        let style = Tensor::<2>::random([10, 4], Distribution::Default, &d);
+        let grads = am.forward(f, style).square().sum().backward();
+        let g = am.gamma.val().grad(&grads).expect("γ has a gradient");
+        assert!(g.abs().sum().into_scalar::<f32>() > 0.0);
+    }
+}

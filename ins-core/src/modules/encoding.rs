@@ -32,3 +32,25 @@ impl FourierEncoding {
         Tensor::cat(parts, 1)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_is_x_then_sin_cos_per_octave() {
+        let d = Device::flex();
+        let x = Tensor::<2>::from_floats([[0.3, -1.2]], &d);
+        let e = FourierEncoding::new(3);
+        assert_eq!(e.d_out(2), 14);
+        let v = e.encode(x).into_data().try_to_vec::<f32>().unwrap();
+        let mut want = vec![0.3f32, -1.2];
+        for k in 0..3 {
+            let f = (1 << k) as f32;
+            want.extend([(0.3 * f).sin(), (-1.2 * f).sin(), (0.3 * f).cos(), (-1.2 * f).cos()]);
+        }
+        for (a, b) in v.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-6, "{v:?} vs {want:?}");
+        }
+    }
+}

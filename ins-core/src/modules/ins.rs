@@ -11,8 +11,7 @@ use burn::tensor::activation::sigmoid;
 use super::am::{Amalgamation, AmalgamationConfig};
 use super::cim::ContentModule;
 use super::sim::{Sim, SimConfig};
-use crate::train::groups::{OptimGroups, Optimizable};
-use burn::tensor::Gradients;
+use crate::train::groups::{GroupSpec, Optimizable};
 
 /// SIM + CIM + AM + linear RGB head with a sigmoid.
 #[derive(Module, Debug)]
@@ -75,17 +74,14 @@ impl<C: ContentModule> Ins<C> {
 }
 
 impl<C: ContentModule> Optimizable for Ins<C> {
-    fn group_names() -> &'static [&'static str] {
-        &["sim", "cim", "am"]
-    }
-
-    fn optimize(self, grads: &mut Gradients, lr: f64, groups: &mut OptimGroups) -> Self {
-        Self {
-            sim: groups.step("sim", self.sim, grads, lr),
-            cim: groups.step("cim", self.cim, grads, lr),
-            am: groups.step("am", self.am, grads, lr),
-            // The head belongs with the amalgamation: it turns fused features into colour.
-            head: groups.step("am", self.head, grads, lr),
-        }
+    /// The RGB head is its own group, so freezing the amalgamation leaves colour trainable.
+    fn groups(&self) -> &'static [GroupSpec] {
+        const GROUPS: &[GroupSpec] = &[
+            GroupSpec::new("sim", &["sim"]),
+            GroupSpec::new("cim", &["cim"]),
+            GroupSpec::new("am", &["am"]),
+            GroupSpec::new("head", &["head"]),
+        ];
+        GROUPS
     }
 }

@@ -61,3 +61,35 @@ impl ReluMlp {
         h
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_skip_layer_sees_the_input_again() {
+        let d = Device::flex();
+        d.seed(3);
+        let mlp = ReluMlpConfig::new(5, 8, 4).with_skip_at(Some(2)).init(&d);
+        let widths: Vec<usize> = mlp.layers.iter().map(|l| l.weight.dims()[0]).collect();
+        assert_eq!(widths, [5, 8, 8 + 5, 8]);
+        // Zero the path through layers 0 and 1: the output then depends on the input only
+        // through the skip, and still does.
+        let mut mlp = mlp;
+        mlp.layers[1].weight = burn::module::Param::from_tensor(Tensor::zeros([8, 8], &d));
+        mlp.layers[1].bias = Some(burn::module::Param::from_tensor(Tensor::zeros([8], &d)));
+        let a = mlp.forward(Tensor::<2>::ones([1, 5], &d));
+        let b = mlp.forward(Tensor::<2>::ones([1, 5], &d).mul_scalar(-2.0));
+        let diff = (a - b).abs().sum().into_scalar::<f32>();
+        assert!(diff > 1e-4, "output ignores the input although the skip carries it");
+    }
+
+    #[test]
+    fn output_is_the_last_hidden_activation() {
+        let d = Device::flex();
+        let mlp = ReluMlpConfig::new(3, 16, 2).init(&d);
+        let y = mlp.forward(Tensor::<2>::random([64, 3], burn::tensor::Distribution::Default, &d));
+        assert_eq!(y.dims(), [64, 16]);
+        assert!(y.min().into_scalar::<f32>() >= 0.0, "ReLU output is negative");
+    }
+}

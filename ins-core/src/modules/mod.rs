@@ -5,11 +5,21 @@
 //!   [`cim::ContentModule`]).
 //! - [`am::Amalgamation`]: content features + style features → output, starting as identity.
 //! - [`ins::Ins`]: the three composed, the library API for custom INRs.
+//! - [`field::Field`]: radiance fields for 3D (hash-grid or NeRF-MLP geometry, view-dependent
+//!   colour); [`radiance_am::RadianceAm`] fuses them with style features.
+//! - [`hash_grid::HashGrid`]: the multiresolution hash encoding of the fast 3D content modules.
 
 pub mod am;
 pub mod cim;
+pub mod color_head;
 pub mod encoding;
+pub mod field;
+pub mod grid_field;
+pub mod hash_grid;
 pub mod ins;
 pub mod mlp;
+pub mod mlp_field;
+pub mod radiance_am;
+pub mod sh;
 pub mod sim;
 pub mod sine;

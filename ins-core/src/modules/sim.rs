@@ -95,3 +95,40 @@ impl Sim {
         h
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    #[test]
+    fn code_at_every_layer_and_position_at_layer_two() {
+        let d = Device::flex();
+        d.seed(4);
+        let sim = SimConfig::new(3)
+            .with_d_hidden(16)
+            .with_depth(4)
+            .with_code_every_layer(true)
+            .with_d_position(7)
+            .init(&d);
+        let inputs: Vec<usize> = sim.layers.iter().map(|l| l.weight.dims()[0]).collect();
+        assert_eq!(inputs, [3, 16 + 3 + 7, 16 + 3, 16 + 3]);
+        let codes = Tensor::<2>::from_floats([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], &d);
+        let pos = Tensor::<2>::random([2, 7], Distribution::Default, &d);
+        let y = sim.forward(codes, Some(pos));
+        assert_eq!(y.dims(), [2, 16]);
+        // Same code, different positions: different style features (they vary over space).
+        let rows = y.clone().slice([0..1]) - y.slice([1..2]);
+        assert!(rows.abs().sum().into_scalar::<f32>() > 1e-4);
+    }
+
+    #[test]
+    fn different_codes_give_different_features() {
+        let d = Device::flex();
+        d.seed(5);
+        let sim = SimConfig::new(2).init(&d);
+        let y = sim.forward(Tensor::<2>::from_floats([[1.0, 0.0], [0.0, 1.0]], &d), None);
+        let rows = y.clone().slice([0..1]) - y.slice([1..2]);
+        assert!(rows.abs().sum().into_scalar::<f32>() > 1e-4);
+    }
+}

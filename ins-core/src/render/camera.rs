@@ -10,7 +10,7 @@
 
 use serde::Serialize;
 
-use super::geometry::{Mat3, Vec3, add, inverse3, mat3_mul_vec, normalize, scale, sub};
+use super::geometry::{Mat3, Vec3, mat3_from_rows};
 
 /// A pinhole camera: image size, intrinsics and camera-to-world pose.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -86,27 +86,31 @@ impl Camera {
 
     /// Rotation part of `c2w` (columns: right, up, back).
     pub fn rotation(&self) -> Mat3 {
-        self.c2w.map(|r| [r[0], r[1], r[2]])
+        mat3_from_rows(self.c2w.map(|r| [r[0], r[1], r[2]]))
     }
 
     /// Camera centre in world coordinates.
     pub fn origin(&self) -> Vec3 {
-        [self.c2w[0][3], self.c2w[1][3], self.c2w[2][3]]
+        Vec3::new(self.c2w[0][3], self.c2w[1][3], self.c2w[2][3])
+    }
+
+    fn column(&self, c: usize) -> Vec3 {
+        Vec3::new(self.c2w[0][c], self.c2w[1][c], self.c2w[2][c])
     }
 
     /// Viewing direction (the −z axis) in world coordinates.
     pub fn forward(&self) -> Vec3 {
-        normalize([-self.c2w[0][2], -self.c2w[1][2], -self.c2w[2][2]])
+        (-self.column(2)).normalize_or_zero()
     }
 
     /// Image-up direction (the +y axis) in world coordinates.
     pub fn up(&self) -> Vec3 {
-        normalize([self.c2w[0][1], self.c2w[1][1], self.c2w[2][1]])
+        self.column(1).normalize_or_zero()
     }
 
     /// Image-right direction (the +x axis) in world coordinates.
     pub fn right(&self) -> Vec3 {
-        normalize([self.c2w[0][0], self.c2w[1][0], self.c2w[2][0]])
+        self.column(0).normalize_or_zero()
     }
 
     /// Direction in the camera frame (OpenGL axes, z = −1, not unit) through the continuous
@@ -114,13 +118,13 @@ impl Camera {
     pub fn direction_camera(&self, x: f32, y: f32) -> Vec3 {
         let yn = (y - self.cy) / self.fy;
         let xn = (x - self.cx - self.skew * yn) / self.fx;
-        [xn, -yn, -1.0]
+        Vec3::new(xn, -yn, -1.0)
     }
 
     /// World-space ray `(origin, unit direction)` through continuous pixel position `(x, y)`.
     pub fn ray(&self, x: f32, y: f32) -> (Vec3, Vec3) {
-        let d = mat3_mul_vec(&self.rotation(), self.direction_camera(x, y));
-        (self.origin(), normalize(d))
+        let d = self.rotation() * self.direction_camera(x, y);
+        (self.origin(), d.normalize_or_zero())
     }
 
     /// World-space ray through the centre of pixel `(u, v)`.
@@ -131,8 +135,12 @@ impl Camera {
     /// World point `p` in the camera frame (OpenGL axes: in front of the camera means z < 0).
     /// `None` only if the rotation is singular.
     pub fn world_to_camera(&self, p: Vec3) -> Option<Vec3> {
-        let inv = inverse3(&self.rotation())?;
-        Some(mat3_mul_vec(&inv, sub(p, self.origin())))
+        let r = self.rotation();
+        let det = r.determinant();
+        if !det.is_finite() || det.abs() < 1e-12 {
+            return None;
+        }
+        Some(r.inverse() * (p - self.origin()))
     }
 
     /// Continuous pixel position of world point `p`, or `None` when it is not in front of the
@@ -182,17 +190,15 @@ impl Camera {
 /// Camera-to-world pose at `eye` looking at `target` (OpenGL axes). `up` must not be parallel
 /// to the viewing direction.
 pub fn pose_look_at(eye: Vec3, target: Vec3, up: Vec3) -> [[f32; 4]; 3] {
-    let back = normalize(sub(eye, target));
-    pose_from_back_up(back, up, eye)
+    pose_from_back_up(eye - target, up, eye)
 }
 
 /// Camera-to-world pose from the backward axis (+z), a rough up vector and the centre; the
 /// LLFF `viewmatrix`. Columns are right = up × back, up' = back × right, back.
 pub fn pose_from_back_up(back: Vec3, up: Vec3, center: Vec3) -> [[f32; 4]; 3] {
-    use super::geometry::cross;
-    let z = normalize(back);
-    let x = normalize(cross(up, z));
-    let y = normalize(cross(z, x));
+    let z = back.normalize_or_zero();
+    let x = up.cross(z).normalize_or_zero();
+    let y = z.cross(x).normalize_or_zero();
     [
         [x[0], y[0], z[0], center[0]],
         [x[1], y[1], z[1], center[1]],
@@ -208,5 +214,5 @@ pub fn flip_yz(c2w: &[[f32; 4]; 3]) -> [[f32; 4]; 3] {
 
 /// Point at distance `t` along the ray `o + t·d`.
 pub fn ray_point(o: Vec3, d: Vec3, t: f32) -> Vec3 {
-    add(o, scale(d, t))
+    o + t * d
 }

@@ -1,10 +1,14 @@
-//! Cameras, rays, ray patches and render paths.
+//! Cameras, rays, ray patches and render paths; samplers along rays (stratified, hierarchical,
+//! occupancy-grid marching) and volume compositing.
 //!
 //! One camera convention for everything (see [`camera`]): camera-to-world, OpenGL axes (x right,
 //! y up, looking down −z), pixel centres at `(u + 0.5, v + 0.5)`.
 
 pub mod camera;
 pub mod geometry;
+pub mod occupancy;
 pub mod patches;
 pub mod paths;
 pub mod rays;
+pub mod samplers;
+pub mod volume;

@@ -1,11 +1,88 @@
 //! Strided K×K ray patches: K×K rays spread over a (K·s)×(K·s) pixel window, so a VGG loss on
 //! the rendered K×K patch sees a large receptive field at the cost of K² rays (INS, Sec. 3.3).
+//!
+//! [`PatchSpec`] is the one definition of the window, used for images (SIREN) and for scenes
+//! (NeRF, IDR): sample `(i, j)` of a patch whose window starts at `(x0, y0)` is pixel
+//! `(x0 + i·s, y0 + j·s)`, and the window `[x0, x0 + K·s) × [y0, y0 + K·s)` lies inside the
+//! image.
 
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
 
 use super::rays::{PixelRef, RayBatch};
 use crate::data::{DataError, Scene, Split};
+
+/// Patch geometry: K rays per side, s pixels apart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PatchSpec {
+    /// Rays per side (K).
+    pub size: u32,
+    /// Pixels between neighbouring rays (s).
+    pub stride: u32,
+}
+
+impl PatchSpec {
+    /// K rays per side, s apart.
+    pub fn new(size: u32, stride: u32) -> Self {
+        Self { size, stride }
+    }
+
+    /// Window side K·s in pixels (saturating, so absurd requests cannot overflow).
+    pub fn span(&self) -> u32 {
+        self.size.saturating_mul(self.stride)
+    }
+
+    /// The patch that fits a `width`×`height` image: the stride is kept and K shrinks until the
+    /// window fits. An error (not a panic) when not even one ray fits or K or s is 0.
+    pub fn fitted(&self, width: u32, height: u32) -> Result<PatchSpec, DataError> {
+        if self.size == 0 || self.stride == 0 {
+            return Err(DataError::Request(format!(
+                "patch size {} and stride {} must be positive",
+                self.size, self.stride
+            )));
+        }
+        let size = self.size.min(width.min(height) / self.stride);
+        if size == 0 {
+            return Err(DataError::Request(format!(
+                "a patch with stride {} does not fit a {width}×{height} image",
+                self.stride
+            )));
+        }
+        Ok(PatchSpec {
+            size,
+            stride: self.stride,
+        })
+    }
+
+    /// A uniformly random window origin inside a `width`×`height` image, or an error when the
+    /// window does not fit.
+    pub fn random_origin(
+        &self,
+        width: u32,
+        height: u32,
+        rng: &mut impl Rng,
+    ) -> Result<(u32, u32), DataError> {
+        let span = self.span();
+        if self.size == 0 || self.stride == 0 || span > width || span > height {
+            return Err(DataError::Request(format!(
+                "a {k}×{k} patch with stride {s} spans {span} pixels, more than the {width}×{height} image",
+                k = self.size,
+                s = self.stride
+            )));
+        }
+        Ok((
+            rng.random_range(0..=width - span),
+            rng.random_range(0..=height - span),
+        ))
+    }
+
+    /// The K·K pixels of the window at `(x0, y0)`, row major (`j · K + i`).
+    pub fn pixels(&self, x0: u32, y0: u32) -> impl Iterator<Item = (u32, u32)> + '_ {
+        let (k, s) = (self.size, self.stride);
+        (0..k).flat_map(move |j| (0..k).map(move |i| (x0 + i * s, y0 + j * s)))
+    }
+}
 
 /// One patch: K×K rays, row major, with the window it came from.
 #[derive(Clone, Debug)]
@@ -18,26 +95,20 @@ pub struct Patch {
     pub x0: u32,
     /// Top row of the window.
     pub y0: u32,
-    /// Patch side K.
-    pub size: u32,
-    /// Stride s between neighbouring rays, in pixels.
-    pub stride: u32,
+    /// The patch geometry.
+    pub spec: PatchSpec,
     /// How many placements were rejected as all background before this one.
     pub redraws: usize,
 }
 
 /// Draws strided patches at random places of random views of a split.
 ///
-/// Sample `(i, j)` of a patch at window origin `(x0, y0)` is the centre of pixel
-/// `(x0 + i·s, y0 + j·s)`; the window `[x0, x0 + K·s) × [y0, y0 + K·s)` lies inside the image.
 /// A patch whose every sample has mask < 0.5 is redrawn (scenes without masks never are), up to
 /// `max_redraws` times; after that the last draw is returned, with `redraws == max_redraws`.
 #[derive(Clone, Debug)]
 pub struct PatchSampler {
-    /// Patch side K (rays per row).
-    pub size: u32,
-    /// Stride s in pixels.
-    pub stride: u32,
+    /// Patch geometry.
+    pub spec: PatchSpec,
     /// Redraws allowed for all-background patches.
     pub max_redraws: usize,
     rng: SmallRng,
@@ -48,8 +119,7 @@ impl PatchSampler {
     /// redraws.
     pub fn new(size: u32, stride: u32, seed: u64) -> Self {
         PatchSampler {
-            size,
-            stride,
+            spec: PatchSpec::new(size, stride),
             max_redraws: 100,
             rng: SmallRng::seed_from_u64(seed),
         }
@@ -57,7 +127,7 @@ impl PatchSampler {
 
     /// Window side K·s in pixels.
     pub fn span(&self) -> u32 {
-        self.size * self.stride
+        self.spec.span()
     }
 
     /// Draws one patch from the views of `split`. Errors when the split is empty, K or s is 0,
@@ -70,28 +140,14 @@ impl PatchSampler {
                 scene.root.display()
             )));
         }
-        if self.size == 0 || self.stride == 0 {
-            return Err(DataError::Request(format!(
-                "patch size {} and stride {} must be positive",
-                self.size, self.stride
-            )));
-        }
-        let span = self.span();
         let mut redraws = 0;
         loop {
             let view = views[self.rng.random_range(0..views.len())];
             let cam = &scene.views[view].camera;
-            if cam.width < span || cam.height < span {
-                return Err(DataError::Request(format!(
-                    "a {k}×{k} patch with stride {s} spans {span} pixels, more than view {view} ({}×{})",
-                    cam.width,
-                    cam.height,
-                    k = self.size,
-                    s = self.stride
-                )));
-            }
-            let x0 = self.rng.random_range(0..=cam.width - span);
-            let y0 = self.rng.random_range(0..=cam.height - span);
+            let (x0, y0) = self
+                .spec
+                .random_origin(cam.width, cam.height, &mut self.rng)
+                .map_err(|e| DataError::Request(format!("view {view}: {e}")))?;
             let patch = self.patch_at(scene, view, x0, y0, redraws)?;
             let background = patch.batch.mask.iter().all(|&m| m < 0.5);
             if !background || redraws >= self.max_redraws {
@@ -110,26 +166,52 @@ impl PatchSampler {
         y0: u32,
         redraws: usize,
     ) -> Result<Patch, DataError> {
-        let k = self.size;
-        let s = self.stride;
-        let mut pixels = Vec::with_capacity((k * k) as usize);
-        for j in 0..k {
-            for i in 0..k {
-                pixels.push(PixelRef {
-                    view,
-                    x: x0 + i * s,
-                    y: y0 + j * s,
-                });
-            }
-        }
+        let pixels: Vec<PixelRef> = self
+            .spec
+            .pixels(x0, y0)
+            .map(|(x, y)| PixelRef { view, x, y })
+            .collect();
         Ok(Patch {
             batch: scene.gather(&pixels)?,
             view,
             x0,
             y0,
-            size: k,
-            stride: s,
+            spec: self.spec,
             redraws,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fitting_shrinks_k_and_never_underflows() {
+        let p = PatchSpec::new(128, 2).fitted(100, 60).unwrap();
+        assert_eq!(p, PatchSpec::new(30, 2));
+        assert!(p.span() <= 60);
+        // Tiny requests and huge strides are errors, not panics.
+        assert!(PatchSpec::new(8, 1).fitted(5, 5).is_ok());
+        assert!(PatchSpec::new(8, 1000).fitted(64, 64).is_err());
+        assert!(PatchSpec::new(0, 1).fitted(64, 64).is_err());
+        assert!(PatchSpec::new(u32::MAX, u32::MAX).fitted(64, 64).is_err());
+        let mut rng = SmallRng::seed_from_u64(0);
+        assert!(PatchSpec::new(40, 2).random_origin(64, 64, &mut rng).is_err());
+        assert!(PatchSpec::new(u32::MAX, 2).random_origin(64, 64, &mut rng).is_err());
+    }
+
+    #[test]
+    fn windows_stay_inside_the_image() {
+        let mut rng = SmallRng::seed_from_u64(1);
+        let p = PatchSpec::new(7, 3);
+        for _ in 0..500 {
+            let (x0, y0) = p.random_origin(30, 22, &mut rng).unwrap();
+            let px: Vec<_> = p.pixels(x0, y0).collect();
+            assert_eq!(px.len(), 49);
+            assert!(px.iter().all(|&(x, y)| x < 30 && y < 22));
+            assert_eq!(px[1].0 - px[0].0, 3);
+            assert_eq!(px[7].1 - px[0].1, 3);
+        }
     }
 }

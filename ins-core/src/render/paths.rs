@@ -2,10 +2,7 @@
 //! smooth interpolation between given cameras.
 
 use super::camera::{Camera, pose_from_back_up, pose_look_at};
-use super::geometry::{
-    Vec3, add, cross, dot, lerp, mat3_from_quat, mat3_mul_vec, norm, normalize, quat_from_mat3,
-    scale, slerp, sub,
-};
+use super::geometry::{Mat3, Quat, Vec3, mat3_rows};
 use crate::data::Scene;
 
 /// `n` cameras on a circle around `center`: distance `radius`, elevation `elevation` (radians,
@@ -20,17 +17,14 @@ pub fn turntable(
     n: usize,
     template: &Camera,
 ) -> Vec<Camera> {
-    let up = normalize(up);
+    let up = up.normalize_or_zero();
     let (e1, e2) = plane_basis(up);
     (0..n)
         .map(|k| {
             let az = start + k as f32 / n as f32 * std::f32::consts::TAU;
-            let horizontal = add(scale(e1, az.cos()), scale(e2, az.sin()));
-            let dir = add(
-                scale(horizontal, elevation.cos()),
-                scale(up, elevation.sin()),
-            );
-            let eye = add(center, scale(dir, radius));
+            let horizontal = e1 * az.cos() + e2 * az.sin();
+            let dir = horizontal * elevation.cos() + up * elevation.sin();
+            let eye = center + dir * radius;
             Camera {
                 c2w: pose_look_at(eye, center, up),
                 ..template.clone()
@@ -50,19 +44,19 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
         .collect();
     let first = cams.first()?;
     let center = scene.bounds.center();
-    let up = normalize(cams.iter().fold([0.0; 3], |a, c| add(a, c.up())));
+    let up = cams.iter().map(|c| c.up()).sum::<Vec3>().normalize_or_zero();
     let mut radius = 0.0;
     let mut elevation = 0.0;
     for c in &cams {
-        let v = sub(c.origin(), center);
-        radius += norm(v);
-        elevation += dot(normalize(v), up).clamp(-1.0, 1.0).asin();
+        let v = c.origin() - center;
+        radius += v.length();
+        elevation += v.normalize_or_zero().dot(up).clamp(-1.0, 1.0).asin();
     }
     radius /= cams.len() as f32;
     elevation /= cams.len() as f32;
     let (e1, e2) = plane_basis(up);
-    let v = sub(first.origin(), center);
-    let start = dot(v, e2).atan2(dot(v, e1));
+    let v = first.origin() - center;
+    let start = v.dot(e2).atan2(v.dot(e1));
     Some(turntable(center, up, radius, elevation, start, n, first))
 }
 
@@ -82,7 +76,7 @@ pub fn spiral(
         return Vec::new();
     };
     let avg = average_pose(cameras);
-    let up = normalize(cameras.iter().fold([0.0; 3], |a, c| add(a, c.up())));
+    let up = cameras.iter().map(|c| c.up()).sum::<Vec3>().normalize_or_zero();
     let close = min_depth * 0.9;
     let inf = max_depth * 5.0;
     let dt = 0.75;
@@ -90,19 +84,19 @@ pub fn spiral(
     let rads: [f32; 3] = std::array::from_fn(|k| {
         percentile(cameras.iter().map(|c| c.origin()[k].abs()).collect(), 90.0)
     });
-    let rot = avg.map(|r| [r[0], r[1], r[2]]);
-    let center = [avg[0][3], avg[1][3], avg[2][3]];
-    let focus = add(center, mat3_mul_vec(&rot, [0.0, 0.0, -focal]));
+    let rot = super::geometry::mat3_from_rows(avg.map(|r| [r[0], r[1], r[2]]));
+    let center = Vec3::new(avg[0][3], avg[1][3], avg[2][3]);
+    let focus = center + rot * Vec3::new(0.0, 0.0, -focal);
     (0..n)
         .map(|k| {
             let theta = k as f32 / n as f32 * std::f32::consts::TAU * rots;
-            let local = [
+            let local = Vec3::new(
                 theta.cos() * rads[0],
                 -theta.sin() * rads[1],
                 -(theta * 0.5).sin() * rads[2],
-            ];
-            let c = add(center, mat3_mul_vec(&rot, local));
-            let back = normalize(sub(c, focus));
+            );
+            let c = center + rot * local;
+            let back = (c - focus).normalize_or_zero();
             Camera {
                 c2w: pose_from_back_up(back, up, c),
                 ..template.clone()
@@ -131,14 +125,9 @@ pub fn spiral_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
 /// sum of up axes, re-orthonormalized.
 pub fn average_pose(cameras: &[Camera]) -> [[f32; 4]; 3] {
     let n = cameras.len().max(1) as f32;
-    let center = scale(
-        cameras.iter().fold([0.0; 3], |a, c| add(a, c.origin())),
-        1.0 / n,
-    );
-    let back = cameras
-        .iter()
-        .fold([0.0; 3], |a, c| add(a, scale(c.forward(), -1.0)));
-    let up = cameras.iter().fold([0.0; 3], |a, c| add(a, c.up()));
+    let center = cameras.iter().map(|c| c.origin()).sum::<Vec3>() / n;
+    let back = -cameras.iter().map(|c| c.forward()).sum::<Vec3>();
+    let up = cameras.iter().map(|c| c.up()).sum::<Vec3>();
     pose_from_back_up(back, up, center)
 }
 
@@ -148,12 +137,15 @@ pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
     let mut out = Vec::new();
     for pair in keys.windows(2) {
         let (a, b) = (&pair[0], &pair[1]);
-        let (qa, qb) = (quat_from_mat3(&a.rotation()), quat_from_mat3(&b.rotation()));
+        let (qa, qb) = (
+            Quat::from_mat3(&a.rotation()).normalize(),
+            Quat::from_mat3(&b.rotation()).normalize(),
+        );
         out.push(a.clone());
         for k in 1..per_segment.max(1) {
             let t = k as f32 / per_segment.max(1) as f32;
-            let r = mat3_from_quat(slerp(qa, qb, t));
-            let p = lerp(a.origin(), b.origin(), t);
+            let r = mat3_rows(Mat3::from_quat(qa.slerp(qb, t)));
+            let p = a.origin().lerp(b.origin(), t);
             let mix = |x: f32, y: f32| x + (y - x) * t;
             out.push(Camera {
                 width: a.width,
@@ -179,13 +171,9 @@ pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
 
 /// Two unit vectors spanning the plane perpendicular to unit vector `up`.
 fn plane_basis(up: Vec3) -> (Vec3, Vec3) {
-    let helper = if up[0].abs() < 0.9 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let e1 = normalize(cross(up, helper));
-    let e2 = cross(up, e1);
+    let helper = if up.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
+    let e1 = up.cross(helper).normalize_or_zero();
+    let e2 = up.cross(e1);
     (e1, e2)
 }
 

@@ -1,7 +1,7 @@
 //! Rays of a scene's cameras, and batches of (ray, colour, mask) triples for training.
 //!
-//! Everything is plain `Vec<[f32; 3]>` / `Vec<f32>`: `origins.as_flattened()` is the `[n, 3]`
-//! row-major layout a tensor wants, so the model code converts without copying twice.
+//! Everything is plain `Vec<Vec3>` / `Vec<f32>` on the host; [`flatten`] gives the `[n, 3]`
+//! row-major layout a tensor wants.
 
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -54,8 +54,7 @@ impl Rays {
 
     /// Point `o + t·d` on ray `i`.
     pub fn point(&self, i: usize, t: f32) -> Vec3 {
-        let (o, d) = (self.origins[i], self.directions[i]);
-        [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]]
+        self.origins[i] + t * self.directions[i]
     }
 
     /// Rays in normalized device coordinates for forward-facing (LLFF) scenes, as in NeRF's
@@ -67,22 +66,27 @@ impl Rays {
         let mut out = Rays::with_capacity(self.len());
         for i in 0..self.len() {
             let (o, d) = (self.origins[i], self.directions[i]);
-            let t = -(near_plane + o[2]) / d[2];
-            let o = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
-            let o_ndc = [
-                -2.0 * focal / w * o[0] / o[2],
-                -2.0 * focal / h * o[1] / o[2],
-                1.0 + 2.0 * near_plane / o[2],
-            ];
-            let d_ndc = [
-                -2.0 * focal / w * (d[0] / d[2] - o[0] / o[2]),
-                -2.0 * focal / h * (d[1] / d[2] - o[1] / o[2]),
-                -2.0 * near_plane / o[2],
-            ];
+            let t = -(near_plane + o.z) / d.z;
+            let o = o + t * d;
+            let o_ndc = Vec3::new(
+                -2.0 * focal / w * o.x / o.z,
+                -2.0 * focal / h * o.y / o.z,
+                1.0 + 2.0 * near_plane / o.z,
+            );
+            let d_ndc = Vec3::new(
+                -2.0 * focal / w * (d.x / d.z - o.x / o.z),
+                -2.0 * focal / h * (d.y / d.z - o.y / o.z),
+                -2.0 * near_plane / o.z,
+            );
             out.push(o_ndc, d_ndc, 0.0, 1.0);
         }
         out
     }
+}
+
+/// Points or directions as the `[n, 3]` row-major values a tensor takes.
+pub fn flatten(v: &[Vec3]) -> Vec<f32> {
+    v.iter().flat_map(|p| p.to_array()).collect()
 }
 
 /// Which pixel a ray belongs to.
@@ -102,7 +106,7 @@ pub struct RayBatch {
     /// The rays (through pixel centres).
     pub rays: Rays,
     /// Target colour in `[0, 1]` (Blender images already composited on white).
-    pub rgb: Vec<Vec3>,
+    pub rgb: Vec<[f32; 3]>,
     /// Foreground weight in `[0, 1]`: the mask or alpha, or 1 where the scene has none.
     pub mask: Vec<f32>,
     /// Where each ray came from.
@@ -131,7 +135,7 @@ pub fn camera_rays(camera: &Camera, range: impl Fn(Vec3, Vec3) -> (f32, f32)) ->
     for v in 0..camera.height {
         for u in 0..camera.width {
             let dc = camera.direction_camera(u as f32 + 0.5, v as f32 + 0.5);
-            let d = super::geometry::normalize(super::geometry::mat3_mul_vec(&rot, dc));
+            let d = (rot * dc).normalize_or_zero();
             let (near, far) = range(o, d);
             rays.push(o, d, near, far);
         }

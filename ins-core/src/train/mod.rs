@@ -1,13 +1,22 @@
 //! The one trainer every variant uses: optimizer groups, schedules, phases, checkpoints,
-//! metrics and progress.
+//! metrics, plots and progress.
 
 pub mod checkpoint;
+pub mod error;
 pub mod groups;
+pub mod guard;
 pub mod metrics;
+pub mod phase;
 pub mod plot;
 pub mod progress;
 pub mod schedule;
 pub mod seeding;
+pub mod task;
 pub mod trainer;
 
-pub use trainer::{LossTerms, Phase, Task, TrainOptions, TrainOutcome, Trainer};
+pub use error::TrainError;
+pub use groups::{GroupSetting, GroupSpec, Optimizable, ParamGroups};
+pub use phase::{Objective, Phase};
+pub use schedule::LrSchedule;
+pub use task::{LossTerms, StepContext, Task};
+pub use trainer::{TrainOptions, TrainOutcome, Trainer, step_seed};

@@ -1,106 +1,271 @@
-//! The loss-curve picture of a run: every term on a log scale, coloured, with a legend.
+//! The loss-curve figure of a run: one row per phase; losses on a log axis on the left, PSNR
+//! (dB, its own linear axis) on the right when the phase logs one. Text is drawn with an
+//! embedded font (a Latin subset of DejaVu Sans), so the figure looks the same on any machine.
 
+use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Once;
 
-use anyhow::Result;
+use anyhow::{Result, anyhow};
+use plotters::prelude::*;
 
-use crate::viz::canvas::Canvas;
+/// A subset of DejaVu Sans (Bitstream Vera licence, `assets/LICENSE-DejaVu.txt`).
+static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans-subset.ttf");
+const FAMILY: &str = "ins-sans";
 
-/// One named curve.
-pub struct Series {
-    /// Legend text.
-    pub name: String,
-    /// (step, value) points.
-    pub points: Vec<(f64, f64)>,
+fn register_font() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // The font is part of the binary; failing to parse it is a build defect.
+        plotters::style::register_font(FAMILY, FontStyle::Normal, FONT)
+            .unwrap_or_else(|_| panic!("the embedded plot font does not parse"));
+    });
 }
 
-const PALETTE: [[u8; 3]; 8] = [
-    [31, 119, 180],
-    [255, 127, 14],
-    [44, 160, 44],
-    [214, 39, 40],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [127, 127, 127],
+/// Curves of one phase: losses (log axis) and PSNR-like metrics (dB).
+#[derive(Default, Debug)]
+struct PhaseCurves {
+    name: String,
+    losses: BTreeMap<String, Vec<(f64, f64)>>,
+    psnr: BTreeMap<String, Vec<(f64, f64)>>,
+}
+
+/// Splits the metrics history into phases, in the order they ran.
+fn phases(history: &[serde_json::Value]) -> Vec<PhaseCurves> {
+    let mut out: Vec<PhaseCurves> = Vec::new();
+    for rec in history {
+        let Some(obj) = rec.as_object() else { continue };
+        let Some(step) = obj.get("step").and_then(|s| s.as_f64()) else {
+            continue;
+        };
+        let phase = obj.get("phase").and_then(|p| p.as_str()).unwrap_or("");
+        if out.last().is_none_or(|p| p.name != phase) {
+            out.push(PhaseCurves {
+                name: phase.to_string(),
+                ..Default::default()
+            });
+        }
+        let cur = out.last_mut().expect("pushed above");
+        for (k, v) in obj {
+            if matches!(k.as_str(), "step" | "phase" | "lr" | "ms") {
+                continue;
+            }
+            let Some(v) = v.as_f64().filter(|v| v.is_finite()) else {
+                continue;
+            };
+            if k.ends_with("psnr") {
+                cur.psnr.entry(k.clone()).or_default().push((step, v));
+            } else if v > 0.0 {
+                let name = if k == "loss" { "total (weighted)" } else { k };
+                cur.losses.entry(name.to_string()).or_default().push((step, v));
+            }
+        }
+    }
+    out
+}
+
+fn range(series: &BTreeMap<String, Vec<(f64, f64)>>) -> Option<((f64, f64), (f64, f64))> {
+    let pts = series.values().flatten();
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    let mut any = false;
+    for &(x, y) in pts {
+        any = true;
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if !any {
+        return None;
+    }
+    if x1 <= x0 {
+        x1 = x0 + 1.0;
+    }
+    Some(((x0, x1), (y0, y1)))
+}
+
+fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow!("drawing the loss curve: {e:?}")
+}
+
+/// Draws the history of a run (records of `metrics.jsonl`) into a PNG at `path`, atomically.
+pub fn plot_history(history: &[serde_json::Value], path: &Path) -> Result<()> {
+    register_font();
+    let phases = phases(history);
+    let rows = phases.len().max(1) as u32;
+    let (w, h) = (1100u32, 330 * rows + 10);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let areas = root.margin(5, 5, 5, 5).split_evenly((rows as usize, 1));
+        for (area, phase) in areas.iter().zip(&phases) {
+            let (left, right) = if phase.psnr.is_empty() {
+                (area.clone(), None)
+            } else {
+                let (l, r) = area.split_horizontally(w * 62 / 100);
+                (l, Some(r))
+            };
+            draw_losses(&left, phase)?;
+            if let Some(r) = right {
+                draw_psnr(&r, phase)?;
+            }
+        }
+        if phases.is_empty() {
+            root.draw(&Text::new(
+                "no metrics logged yet",
+                (20, 20),
+                (FAMILY, 18).into_font(),
+            ))
+            .map_err(draw_err)?;
+        }
+        root.present().map_err(draw_err)?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| anyhow!("plot buffer size"))?;
+    ins_io::write_atomic_with(path, |tmp| {
+        img.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(|e| anyhow!("writing {}: {e}", path.display()))
+    })
+}
+
+const COLORS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
 ];
 
-/// Draws `series` (positive values, log10 y axis) into a PNG at `path`.
-pub fn plot_losses(series: &[Series], path: &Path) -> Result<()> {
-    let (w, h) = (900u32, 520u32);
-    let (left, right, top, bottom) = (70i32, 200i32, 20i32, 40i32);
-    let mut c = Canvas::new(w, h, [255, 255, 255]);
-    let pts = |s: &Series| {
-        s.points
-            .iter()
-            .filter(|(_, v)| v.is_finite() && *v > 0.0)
-            .map(|&(x, v)| (x, v.log10()))
-            .collect::<Vec<_>>()
+fn draw_losses<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    phase: &PhaseCurves,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let Some(((x0, x1), (y0, y1))) = range(&phase.losses) else {
+        return Ok(());
     };
-    let all: Vec<(f64, f64)> = series.iter().flat_map(pts).collect();
-    let (x0, x1, y0, y1) = if all.is_empty() {
-        (0.0, 1.0, 0.0, 1.0)
-    } else {
-        let x0 = all.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
-        let x1 = all.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
-        let y0 = all
-            .iter()
-            .map(|p| p.1)
-            .fold(f64::INFINITY, f64::min)
-            .floor();
-        let y1 = all
-            .iter()
-            .map(|p| p.1)
-            .fold(f64::NEG_INFINITY, f64::max)
-            .ceil();
-        (
-            x0,
-            if x1 > x0 { x1 } else { x0 + 1.0 },
-            y0,
-            if y1 > y0 { y1 } else { y0 + 1.0 },
+    let (y0, y1) = (y0 * 0.8, y1 * 1.25);
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            format!("{}: losses", phase.name),
+            (FAMILY, 18).into_font(),
         )
+        .margin(8)
+        .x_label_area_size(36)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("step")
+        .y_desc("value (log scale)")
+        .label_style((FAMILY, 13).into_font())
+        .axis_desc_style((FAMILY, 14).into_font())
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .draw()
+        .map_err(draw_err)?;
+    for (i, (name, pts)) in phase.losses.iter().enumerate() {
+        let c = COLORS[i % COLORS.len()];
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
+            .map_err(draw_err)?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(3)));
+    }
+    chart
+        .configure_series_labels()
+        .label_font((FAMILY, 14).into_font())
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(draw_err)?;
+    Ok(())
+}
+
+fn draw_psnr<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    phase: &PhaseCurves,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let Some(((x0, x1), (y0, y1))) = range(&phase.psnr) else {
+        return Ok(());
     };
-    let pw = w as i32 - left - right;
-    let ph = h as i32 - top - bottom;
-    let sx = |x: f64| left + ((x - x0) / (x1 - x0) * pw as f64).round() as i32;
-    let sy = |y: f64| top + ph - ((y - y0) / (y1 - y0) * ph as f64).round() as i32;
-    let grey = [200, 200, 200];
-    let black = [0, 0, 0];
-    // Decades on the y axis.
-    let mut d = y0 as i32;
-    while d as f64 <= y1 {
-        let y = sy(d as f64);
-        c.line(left, y, left + pw, y, grey);
-        c.text(4, y - 5, &format!("1e{d}"), black, 2);
-        d += 1;
-    }
-    // Steps on the x axis.
-    for i in 0..=4 {
-        let x = x0 + (x1 - x0) * i as f64 / 4.0;
-        let px = sx(x);
-        c.line(px, top, px, top + ph, grey);
-        c.text(
-            px - 10,
-            top + ph + 8,
-            &format!("{}", x.round() as i64),
-            black,
-            2,
-        );
-    }
-    c.text(left + pw / 2 - 20, h as i32 - 14, "step", black, 2);
-    c.rect_outline(left, top, pw, ph, black);
-    for (i, s) in series.iter().enumerate() {
-        let col = PALETTE[i % PALETTE.len()];
-        let p = pts(s);
-        for win in p.windows(2) {
-            c.line(sx(win[0].0), sy(win[0].1), sx(win[1].0), sy(win[1].1), col);
+    let pad = ((y1 - y0) * 0.1).max(0.5);
+    let mut chart = ChartBuilder::on(area)
+        .caption(format!("{}: PSNR", phase.name), (FAMILY, 18).into_font())
+        .margin(8)
+        .x_label_area_size(36)
+        .y_label_area_size(50)
+        .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("step")
+        .y_desc("dB")
+        .label_style((FAMILY, 13).into_font())
+        .axis_desc_style((FAMILY, 14).into_font())
+        .draw()
+        .map_err(draw_err)?;
+    for (i, (name, pts)) in phase.psnr.iter().enumerate() {
+        let c = COLORS[(i + 3) % COLORS.len()];
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
+            .map_err(draw_err)?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(3)));
+        if pts.len() < 30 {
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))
+                .map_err(draw_err)?;
         }
-        if p.len() == 1 {
-            c.fill_rect(sx(p[0].0) - 2, sy(p[0].1) - 2, 5, 5, col);
-        }
-        let ly = top + 10 + 22 * i as i32;
-        c.fill_rect(left + pw + 12, ly, 20, 4, col);
-        c.text(left + pw + 38, ly - 4, &s.name, black, 2);
     }
-    c.save(path)
+    chart
+        .configure_series_labels()
+        .label_font((FAMILY, 14).into_font())
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::LowerRight)
+        .draw()
+        .map_err(draw_err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn phases_split_and_psnr_goes_to_its_own_axis() {
+        let h: Vec<serde_json::Value> = vec![
+            serde_json::json!({"step": 9, "phase": "fit", "mse": 0.1, "psnr": 10.0, "loss": 0.1, "lr": 1e-3, "ms": 3.0}),
+            serde_json::json!({"step": 19, "phase": "fit", "mse": 0.01, "psnr": 20.0, "loss": 0.01, "lr": 1e-3, "ms": 3.0}),
+            serde_json::json!({"step": 29, "phase": "stylize", "style": 2.0, "content": 1.0, "loss": 5.0}),
+        ];
+        let p = phases(&h);
+        assert_eq!(p.len(), 2);
+        assert_eq!(p[0].psnr["psnr"], vec![(9.0, 10.0), (19.0, 20.0)]);
+        assert!(p[0].losses.contains_key("mse") && !p[0].losses.contains_key("lr"));
+        assert!(p[1].psnr.is_empty() && p[1].losses.len() == 3);
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("curve.png");
+        plot_history(&h, &out).unwrap();
+        let img = image::open(&out).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (1100, 670));
+        // Something besides the white background was drawn in both rows.
+        let dark = |y0: u32, y1: u32| {
+            (y0..y1)
+                .flat_map(|y| (0..1100).map(move |x| (x, y)))
+                .filter(|&(x, y)| img.get_pixel(x, y).0.iter().all(|&c| c < 100))
+                .count()
+        };
+        assert!(dark(0, 330) > 1000 && dark(340, 670) > 1000);
+    }
 }

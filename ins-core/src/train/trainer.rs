@@ -1,124 +1,25 @@
-//! The one trainer: phases of steps, each a weighted sum of loss terms minimised with Adam per
-//! optimizer group; seeded, checkpointed, resumable, logged, and guarded against NaN.
+//! The one trainer: phases of steps, each a weighted sum of loss terms minimised with Adam;
+//! optimizer groups with per-phase multipliers and freezing; seeded, checkpointed, resumable,
+//! logged, plotted, and guarded against NaN.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
 use burn::module::{Module, ModuleVisitor, Param};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::checkpoint::{Checkpoint, CheckpointStore, load_module_bytes, module_bytes};
-use super::groups::{GroupSetting, OptimGroups, Optimizable};
+use super::error::TrainError;
+use super::groups::ParamGroups;
+use super::guard::StepValues;
 use super::metrics::MetricsLog;
-use super::plot::{Series, plot_losses};
+use super::phase::{Objective, Phase};
+use super::plot::plot_history;
 use super::progress::Progress;
-use super::schedule::LrSchedule;
-
-/// One phase of training (e.g. "fit" then "stylize").
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct Phase {
-    /// Name shown in logs and passed to the task.
-    pub name: String,
-    /// Number of steps.
-    pub steps: usize,
-    /// Learning-rate schedule, restarted at the phase's first step.
-    pub lr: LrSchedule,
-    /// Multiplier and freezing per optimizer group (missing: ×1, trained).
-    #[serde(default)]
-    pub groups: BTreeMap<String, GroupSetting>,
-    /// Weight per loss term (missing: 1).
-    #[serde(default)]
-    pub weights: BTreeMap<String, f64>,
-}
-
-impl Phase {
-    /// A phase with a constant learning rate and no per-group or per-term settings.
-    pub fn new(name: &str, steps: usize, lr: f64) -> Self {
-        Self {
-            name: name.to_string(),
-            steps,
-            lr: LrSchedule::constant(lr),
-            groups: BTreeMap::new(),
-            weights: BTreeMap::new(),
-        }
-    }
-
-    /// Sets the weight of a loss term.
-    pub fn weight(mut self, term: &str, w: f64) -> Self {
-        self.weights.insert(term.to_string(), w);
-        self
-    }
-
-    /// Freezes an optimizer group.
-    pub fn freeze(mut self, group: &str) -> Self {
-        self.groups.insert(
-            group.to_string(),
-            GroupSetting {
-                lr_mult: 1.0,
-                frozen: true,
-            },
-        );
-        self
-    }
-
-    /// Sets a group's learning-rate multiplier.
-    pub fn lr_mult(mut self, group: &str, mult: f64) -> Self {
-        let e = self.groups.entry(group.to_string()).or_default();
-        e.lr_mult = mult;
-        self
-    }
-}
-
-/// The loss terms of one step, unweighted, plus metrics that are only logged.
-#[derive(Default)]
-pub struct LossTerms {
-    /// Named scalar (`[1]`) terms; the trainer weights and sums them.
-    pub terms: Vec<(String, Tensor<1>)>,
-    /// Extra logged numbers.
-    pub metrics: Vec<(String, f64)>,
-    /// Logged numbers computed from a term's value once the trainer has read it (e.g. PSNR
-    /// from MSE), so the task does not read the term a second time.
-    pub derived: Vec<(String, String, fn(f64) -> f64)>,
-}
-
-impl LossTerms {
-    /// Adds a term.
-    pub fn term(mut self, name: &str, value: Tensor<1>) -> Self {
-        self.terms.push((name.to_string(), value));
-        self
-    }
-
-    /// Adds a logged metric.
-    pub fn metric(mut self, name: &str, value: f64) -> Self {
-        self.metrics.push((name.to_string(), value));
-        self
-    }
-
-    /// Logs `f(value of term)` as `name`.
-    pub fn metric_of(mut self, name: &str, term: &str, f: fn(f64) -> f64) -> Self {
-        self.derived.push((name.to_string(), term.to_string(), f));
-        self
-    }
-}
-
-/// What a variant tells the trainer.
-pub trait Task {
-    /// The model trained.
-    type Model: Optimizable;
-
-    /// The loss terms of step `step_in_phase` of `phase`. `seed` is fixed per global step, so
-    /// a resumed run draws the same batches as an uninterrupted one.
-    fn losses(
-        &mut self,
-        model: &Self::Model,
-        phase: &Phase,
-        step_in_phase: usize,
-        seed: u64,
-    ) -> Result<LossTerms>;
-}
+use super::task::{StepContext, Task};
 
 /// Run-level options.
 #[derive(Debug, Clone)]
@@ -169,11 +70,12 @@ pub struct TrainOutcome<M> {
 }
 
 /// Runs phases of a [`Task`].
-pub struct Trainer {
-    phases: Vec<Phase>,
+pub struct Trainer<O> {
+    phases: Vec<Phase<O>>,
     opts: TrainOptions,
 }
 
+/// What a checkpoint records of the trainer itself.
 #[derive(Serialize, Deserialize, Default)]
 struct TrainerState {
     step: usize,
@@ -189,9 +91,13 @@ pub fn step_seed(seed: u64, step: usize) -> u64 {
     z ^ (z >> 31)
 }
 
-impl Trainer {
+fn adam() -> ModuleOptimizer {
+    AdamConfig::new().with_epsilon(1e-8).init()
+}
+
+impl<O: Objective> Trainer<O> {
     /// A trainer for `phases`.
-    pub fn new(phases: Vec<Phase>, opts: TrainOptions) -> Self {
+    pub fn new(phases: Vec<Phase<O>>, opts: TrainOptions) -> Self {
         Self { phases, opts }
     }
 
@@ -200,6 +106,7 @@ impl Trainer {
         self.phases.iter().map(|p| p.steps).sum()
     }
 
+    /// The phase of global step `step` and the step within it.
     fn phase_at(&self, step: usize) -> (usize, usize) {
         let mut start = 0;
         for (i, p) in self.phases.iter().enumerate() {
@@ -211,163 +118,98 @@ impl Trainer {
         (self.phases.len().saturating_sub(1), 0)
     }
 
+    fn store(&self) -> CheckpointStore {
+        CheckpointStore::new(self.opts.out_dir.join("checkpoints"), 2)
+    }
+
     /// Trains `model` on `task`, resuming from the run folder's newest checkpoint if asked.
-    pub fn run<T: Task>(
+    pub fn run<T: Task<Objective = O>>(
         &self,
         task: &mut T,
-        mut model: T::Model,
-    ) -> Result<TrainOutcome<T::Model>> {
+        model: T::Model,
+    ) -> Result<TrainOutcome<T::Model>, TrainError> {
+        let groups = ParamGroups::resolve(&model)?;
+        for p in &self.phases {
+            p.validate(&groups, task.terms(p.objective))?;
+        }
         let out = &self.opts.out_dir;
-        std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-        let store = CheckpointStore::new(out.join("checkpoints"), 2);
-        let names = <T::Model as Optimizable>::group_names();
-        let mut groups = OptimGroups::new(names);
-        let mut state = TrainerState {
-            seed: self.opts.seed,
-            ..Default::default()
-        };
-
-        if self.opts.resume {
-            match store.load_latest()? {
-                Some(ckpt) => {
-                    let origin = store.dir().join("latest");
-                    model = load_module_bytes(model, ckpt.model, &origin)?;
-                    groups.load_bytes(ckpt.optim)?;
-                    state = serde_json::from_value(ckpt.state).with_context(|| {
-                        format!("{}: malformed trainer state", origin.display())
-                    })?;
-                }
-                None => bail!(
-                    "--resume: no checkpoint in {} (start without --resume)",
-                    store.dir().display()
-                ),
-            }
-        } else if store.dir().join("latest").exists() {
-            bail!(
-                "{} already holds a run; pass --resume to continue it or choose another --out",
-                out.display()
-            );
-        }
-        // The metrics log mirrors the history up to the resumed step.
-        let metrics_path = out.join("metrics.jsonl");
-        std::fs::remove_file(&metrics_path).ok();
-        let mut log = MetricsLog::open(&metrics_path)?;
-        for rec in &state.history {
-            log.write(rec)?;
-        }
+        std::fs::create_dir_all(out).map_err(|e| TrainError::io(out, e))?;
+        let store = self.store();
+        let (mut model, mut optim, mut state) = self.start(&store, task, model)?;
+        let mut log = MetricsLog::rewrite(&out.join("metrics.jsonl"), &state.history)?;
 
         let total = self.total_steps();
         let start = state.step;
         let progress = Progress::new(total, start, self.opts.quiet);
         let t0 = Instant::now();
         let mut last = BTreeMap::new();
-        let mut current_phase = usize::MAX;
+        let mut current_phase = None;
         let mut step = start;
-        let mut run_here = 0usize;
-        while step < total {
-            if let Some(limit) = self.opts.stop_after
-                && run_here >= limit
-            {
-                break;
-            }
+        while step < total && self.opts.stop_after.is_none_or(|n| step - start < n) {
             let (pi, in_phase) = self.phase_at(step);
             let phase = &self.phases[pi];
-            if pi != current_phase {
+            if current_phase != Some(pi) {
                 if pi > 0 && in_phase == 0 {
                     // A new phase optimizes a new objective: its Adam moments start afresh
                     // (also when a resumed run starts exactly here).
-                    groups = OptimGroups::new(names);
+                    optim = adam();
                 }
-                groups.configure(&phase.groups);
-                current_phase = pi;
+                model = groups.apply_freezing(model, &phase.groups);
+                current_phase = Some(pi);
+                if pi > 0 || in_phase > 0 {
+                    progress.println(format!("phase {}: {} steps", phase.name, phase.steps));
+                }
             }
+            let ctx = StepContext {
+                phase,
+                step_in_phase: in_phase,
+                global_step: step,
+                seed: step_seed(state.seed, step),
+            };
+            let lr = phase.lr.at(in_phase);
             let ts = Instant::now();
-            let terms = task.losses(&model, phase, in_phase, step_seed(state.seed, step))?;
-            let mut total_loss: Option<Tensor<1>> = None;
-            for (name, t) in &terms.terms {
-                let w = phase.weights.get(name).copied().unwrap_or(1.0);
-                if w != 0.0 {
-                    let weighted = t.clone().mul_scalar(w);
-                    total_loss = Some(match total_loss {
-                        Some(acc) => acc + weighted,
-                        None => weighted,
-                    });
-                }
+            // The task's state before this step belongs with the parameters before it.
+            let due = self.opts.checkpoint_every > 0
+                && step > start
+                && step.is_multiple_of(self.opts.checkpoint_every);
+            let task_state = if due { Some(task.save_state()?) } else { None };
+            let terms = task.losses(&model, &ctx)?;
+            check_declared(&terms, phase, task.terms(phase.objective))?;
+            let values = StepValues::read(&terms, phase, step, lr, || store.latest_path())?;
+            // Parameters that produced a finite loss are the ones checkpointed.
+            if let Some(task_state) = task_state {
+                state.step = step;
+                self.save(&store, &model, &optim, &state, task_state)?;
+                self.write_plot(&state);
             }
-            // Every term and the total come back to the host in one read: one sync per step.
-            let read: Vec<Tensor<1>> = terms
-                .terms
-                .iter()
-                .map(|(_, t)| t.clone())
-                .chain(total_loss.clone())
-                .map(|t| t.detach())
-                .collect();
-            let values = Tensor::cat(read, 0)
-                .into_data()
-                .convert::<f32>()
-                .try_to_vec::<f32>()
-                .map_err(|e| anyhow::anyhow!("reading the loss values: {e:?}"))?;
+            let grads = GradientsParams::from_grads(values.total.backward(), &model);
+            model = optim.step(groups.learning_rates(lr, &phase.groups), model, grads);
+            let extra = task.after_step(&model, &ctx)?;
+            step += 1;
+
             let mut record = serde_json::Map::new();
-            record.insert("step".into(), step.into());
+            record.insert("step".into(), (step - 1).into());
             record.insert("phase".into(), phase.name.clone().into());
-            for ((name, _), &value) in terms.terms.iter().zip(&values) {
-                let w = phase.weights.get(name).copied().unwrap_or(1.0);
-                if !value.is_finite() {
-                    let good = store
-                        .latest_model_path()
-                        .map(|p| format!("the last good checkpoint is {}", p.display()))
-                        .unwrap_or_else(|| "no checkpoint was written yet".to_string());
-                    bail!(
-                        "the loss diverged: term {name:?} is {value} at step {step} (phase {}); {good}. \
-                         Lower the learning rate (now {:.2e}) or the weight of {name:?} ({w}), then resume with --resume.",
-                        phase.name,
-                        phase.lr.at(in_phase)
-                    );
-                }
-                last.insert(name.clone(), value as f64);
-                record.insert(name.clone(), (value as f64).into());
+            for (name, v) in &values.terms {
+                last.insert(name.to_string(), *v);
+                record.insert(name.to_string(), (*v).into());
             }
             for (name, term, f) in &terms.derived {
-                if let Some(i) = terms.terms.iter().position(|(n, _)| n == term) {
-                    let v = f(values[i] as f64);
-                    last.insert(name.clone(), v);
-                    record.insert(name.clone(), v.into());
+                if let Some((_, v)) = values.terms.iter().find(|(n, _)| n == term) {
+                    let d = f(*v);
+                    last.insert(name.to_string(), d);
+                    record.insert(name.to_string(), d.into());
                 }
             }
-            for (name, v) in &terms.metrics {
+            for (name, v) in terms.metrics.iter().chain(&extra) {
                 last.insert(name.clone(), *v);
                 record.insert(name.clone(), (*v).into());
             }
-            // Parameters that produced a finite loss are the ones checkpointed.
-            if self.opts.checkpoint_every > 0
-                && step > start
-                && step.is_multiple_of(self.opts.checkpoint_every)
-            {
-                state.step = step;
-                self.save(&store, &model, &groups, &state)?;
-            }
-            let Some(total_loss) = total_loss else {
-                bail!("phase {} has no weighted loss term", phase.name);
-            };
-            let total_value = values[terms.terms.len()];
-            if !total_value.is_finite() {
-                bail!(
-                    "the weighted loss is {total_value} at step {step} (phase {}) although every term is finite: \
-                     a loss weight is too large for f32 ({:?})",
-                    phase.name,
-                    phase.weights
-                );
-            }
-            record.insert("loss".into(), (total_value as f64).into());
-            let lr = phase.lr.at(in_phase);
-            let mut grads = total_loss.backward();
-            model = model.optimize(&mut grads, lr, &mut groups);
-            step += 1;
-            run_here += 1;
-            let ms = ts.elapsed().as_secs_f64() * 1e3;
+            record.insert("loss".into(), values.total_value.into());
             record.insert("lr".into(), lr.into());
-            record.insert("ms".into(), ms.into());
-            if step % self.opts.log_every.max(1) == 0 || step == total {
+            record.insert("ms".into(), (ts.elapsed().as_secs_f64() * 1e3).into());
+            if step.is_multiple_of(self.opts.log_every.max(1)) || step == total || !extra.is_empty()
+            {
                 let rec = serde_json::Value::Object(record);
                 log.write(&rec)?;
                 state.history.push(rec);
@@ -376,62 +218,113 @@ impl Trainer {
         }
         progress.finish();
         state.step = step;
-        let finished = step >= total;
         if !params_finite(&model) {
-            bail!(
-                "the last update made parameters non-finite at step {step}; the last good checkpoint is in {}",
-                store.dir().display()
-            );
+            return Err(TrainError::NonFiniteParameters {
+                step,
+                checkpoint: store.latest_path(),
+            });
         }
-        self.save(&store, &model, &groups, &state)?;
-        self.write_plot(&state)?;
+        self.save(&store, &model, &optim, &state, task.save_state()?)?;
+        self.write_plot(&state);
         Ok(TrainOutcome {
             model,
             steps: step,
-            finished,
+            finished: step >= total,
             last,
             seconds: t0.elapsed().as_secs_f64(),
         })
     }
 
-    fn save<M: Optimizable>(
+    /// A fresh start (refusing to overwrite a run) or the state of the newest checkpoint.
+    fn start<T: Task<Objective = O>>(
+        &self,
+        store: &CheckpointStore,
+        task: &mut T,
+        model: T::Model,
+    ) -> Result<(T::Model, ModuleOptimizer, TrainerState), TrainError> {
+        let fresh = TrainerState {
+            seed: self.opts.seed,
+            ..Default::default()
+        };
+        if !self.opts.resume {
+            if store.dir().join("latest").exists() {
+                return Err(TrainError::RunExists {
+                    dir: self.opts.out_dir.clone(),
+                });
+            }
+            return Ok((model, adam(), fresh));
+        }
+        let Some(dir) = store.latest_dir()? else {
+            return Err(TrainError::NothingToResume {
+                dir: store.dir().to_path_buf(),
+            });
+        };
+        let ckpt = CheckpointStore::load_dir(&dir)?;
+        let model = load_module_bytes(model, ckpt.model, &dir.join("model.bpk"))?;
+        let optim = adam()
+            .from_bytes(burn::tensor::Bytes::from_bytes_vec(ckpt.optim))
+            .map_err(|e| TrainError::checkpoint(dir.join("optim.bpk"), e))?;
+        let state: TrainerState = serde_json::from_value(ckpt.state)
+            .map_err(|e| TrainError::checkpoint(dir.join("state.json"), e))?;
+        if let Some(bytes) = ckpt.task {
+            task.load_state(&bytes)
+                .map_err(|e| TrainError::checkpoint(dir.join("task.bin"), format!("{e:#}")))?;
+        }
+        Ok((model, optim, state))
+    }
+
+    fn save<M: Module>(
         &self,
         store: &CheckpointStore,
         model: &M,
-        groups: &OptimGroups,
+        optim: &ModuleOptimizer,
         state: &TrainerState,
-    ) -> Result<()> {
+        task: Option<Vec<u8>>,
+    ) -> Result<(), TrainError> {
+        let optim = optim
+            .into_bytes()
+            .map_err(|e| TrainError::checkpoint(store.dir(), format!("serializing Adam: {e}")))?;
         store.save(&Checkpoint {
             step: state.step,
             model: module_bytes(model)?,
-            optim: groups.to_bytes()?,
-            state: serde_json::to_value(state)?,
+            optim: optim.to_vec(),
+            state: serde_json::to_value(state)
+                .map_err(|e| TrainError::checkpoint(store.dir(), e))?,
+            task,
         })?;
         Ok(())
     }
 
-    fn write_plot(&self, state: &TrainerState) -> Result<()> {
-        let mut series: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-        for rec in &state.history {
-            let Some(obj) = rec.as_object() else { continue };
-            let Some(step) = obj.get("step").and_then(|s| s.as_f64()) else {
-                continue;
-            };
-            for (k, v) in obj {
-                if matches!(k.as_str(), "step" | "phase" | "lr" | "ms") {
-                    continue;
-                }
-                if let Some(v) = v.as_f64() {
-                    series.entry(k.clone()).or_default().push((step, v));
-                }
-            }
+    /// Redraws `loss_curve.png`. A plot that cannot be drawn is reported, not fatal.
+    fn write_plot(&self, state: &TrainerState) {
+        let path = self.opts.out_dir.join("loss_curve.png");
+        if let Err(e) = plot_history(&state.history, &path) {
+            eprintln!("warning: could not draw {}: {e:#}", path.display());
         }
-        let series: Vec<Series> = series
-            .into_iter()
-            .map(|(name, points)| Series { name, points })
-            .collect();
-        plot_losses(&series, &self.opts.out_dir.join("loss_curve.png"))
     }
+
+    /// The run folder.
+    pub fn out_dir(&self) -> &Path {
+        &self.opts.out_dir
+    }
+}
+
+/// A task must return only the terms it declares for the objective.
+fn check_declared<O>(
+    terms: &super::task::LossTerms,
+    phase: &Phase<O>,
+    declared: &[&str],
+) -> Result<(), TrainError> {
+    for (name, _) in &terms.terms {
+        if !declared.contains(name) {
+            return Err(TrainError::UndeclaredTerm {
+                phase: phase.name.clone(),
+                term: name.to_string(),
+                known: declared.join(", "),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn status_line(phase: &str, last: &BTreeMap<String, f64>) -> String {
@@ -449,9 +342,7 @@ pub fn params_finite<M: Module>(model: &M) -> bool {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
             if self.0 {
                 let t = param.val();
-                let bad = t.clone().is_nan().any().into_scalar::<bool>()
-                    || t.is_inf().any().into_scalar::<bool>();
-                self.0 = !bad;
+                self.0 = t.is_finite().all().into_scalar::<bool>();
             }
         }
     }

@@ -1,0 +1,298 @@
+//! `ins-cli train nerf`, `render nerf` and `eval nerf`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use burn::prelude::*;
+use clap::{ArgMatches, Args};
+use ins_core::backend::BackendChoice;
+use ins_core::data::Split;
+use ins_core::imaging::RgbImage;
+use ins_core::render::camera::Camera;
+use ins_core::render::paths::{spiral_for_scene, turntable_for_scene};
+use ins_core::train::TrainOptions;
+use ins_models::config::merge_with_file;
+use ins_models::nerf::config::RunKind;
+use ins_models::nerf::eval::{ViewRender, evaluate_views, render_camera};
+use ins_models::nerf::{NerfRun, NerfRunConfig};
+use vgg_import::load_vgg;
+
+use crate::siren_cmd::{RunArgs, parse_size};
+use crate::video::{write_frames, FrameOutput};
+use crate::vgg_cmd::VggArgs;
+
+#[derive(Args, Debug)]
+pub struct TrainNerf {
+    /// Run folder (metrics, loss curve, val pictures, config, checkpoints).
+    #[arg(long, default_value = "runs/nerf")]
+    out: PathBuf,
+    #[command(flatten)]
+    config: NerfRunConfig,
+    #[command(flatten)]
+    run: RunArgs,
+    #[command(flatten)]
+    vgg: VggArgs,
+}
+
+pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
+    let cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
+    let kind = cfg.kind()?;
+    let backend = a.run.backend.resolve();
+    let device = backend.device();
+    let mut opts = TrainOptions::new(&a.out);
+    opts.seed = cfg.seed;
+    opts.checkpoint_every = cfg.checkpoint_every;
+    opts.resume = a.run.resume;
+    opts.quiet = a.run.quiet;
+    let outcome = match kind {
+        RunKind::Pretrain => {
+            eprintln!(
+                "pretraining a NeRF ({} content module) on {} with {backend} into {}",
+                cfg.cim,
+                cfg.scene.as_ref().map_or(String::new(), |p| p.display().to_string()),
+                a.out.display()
+            );
+            ins_models::nerf::pretrain(&cfg, &device, opts)?
+        }
+        RunKind::Stylize => {
+            let vgg = load_vgg(&a.vgg.source(), &device)?;
+            eprintln!(
+                "stylizing {} with {} style{} on {backend} into {}",
+                cfg.from.as_ref().map_or(String::new(), |p| p.display().to_string()),
+                cfg.styles.len(),
+                if cfg.styles.len() == 1 { "" } else { "s" },
+                a.out.display()
+            );
+            ins_models::nerf::stylize(&cfg, vgg, &device, opts)?
+        }
+    };
+    println!(
+        "{}",
+        serde_json::json!({
+            "run": a.out,
+            "steps": outcome.steps,
+            "seconds": (outcome.seconds * 10.0).round() / 10.0,
+            "last": outcome.last,
+        })
+    );
+    eprintln!(
+        "done in {:.1} s: see {}/val/ and loss_curve.png; render with `ins-cli render nerf --run {}`",
+        outcome.seconds,
+        a.out.display(),
+        a.out.display()
+    );
+    Ok(())
+}
+
+/// Which cameras to render.
+#[derive(Args, Debug)]
+#[group(required = false, multiple = false)]
+pub struct Cameras {
+    /// Every view of a split (val or test); --out is a folder.
+    #[arg(long)]
+    split: Option<Split>,
+    /// One view by index.
+    #[arg(long)]
+    view: Option<usize>,
+    /// A camera path: spiral (forward-facing scenes) or turntable (360° scenes).
+    #[arg(long)]
+    path: Option<String>,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderNerf {
+    /// Run folder written by `train nerf`.
+    #[arg(long)]
+    run: PathBuf,
+    #[command(flatten)]
+    cameras: Cameras,
+    /// Frames of a --path.
+    #[arg(long, default_value_t = 60)]
+    frames: usize,
+    /// Style weights, comma-separated (stylized runs; default: the first style).
+    #[arg(long, value_delimiter = ',')]
+    mix: Option<Vec<f32>>,
+    /// Render the depth (colour-mapped) instead of the colour.
+    #[arg(long)]
+    depth: bool,
+    /// Output size WxH (default: the run's training resolution).
+    #[arg(long)]
+    size: Option<String>,
+    /// Output: a .png (one view), a .gif or .mp4 (a path), or a folder (frames).
+    #[arg(long)]
+    out: PathBuf,
+    /// Backend.
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
+}
+
+fn resized(camera: &Camera, size: Option<(usize, usize)>) -> Camera {
+    let Some((w, h)) = size else { return camera.clone() };
+    let (sx, sy) = (w as f32 / camera.width as f32, h as f32 / camera.height as f32);
+    Camera {
+        width: w as u32,
+        height: h as u32,
+        fx: camera.fx * sx,
+        fy: camera.fy * sy,
+        cx: camera.cx * sx,
+        cy: camera.cy * sy,
+        skew: camera.skew * sx,
+        c2w: camera.c2w,
+    }
+}
+
+fn picture(r: &ViewRender, depth: bool) -> RgbImage {
+    if depth { r.depth_picture() } else { r.image() }
+}
+
+pub fn render(a: RenderNerf) -> Result<()> {
+    let device = a.backend.device();
+    let run = NerfRun::load(&a.run, &device)?;
+    let code = run.code(a.mix.as_deref(), &device)?;
+    let size = a.size.as_deref().map(parse_size).transpose()?;
+    let model = run.model.valid();
+    let scene = &run.scene;
+    let shoot = |camera: &Camera| -> Result<RgbImage> {
+        let cam = resized(camera, size);
+        let r = render_camera(&model, scene, &cam, run.sampling(), code.clone(), run.background(), &device)?;
+        Ok(picture(&r, a.depth))
+    };
+    let c = &a.cameras;
+    if let Some(view) = c.view {
+        let v = scene
+            .views
+            .get(view)
+            .with_context(|| format!("--view {view}: the scene has {} views", scene.views.len()))?;
+        let img = shoot(&v.camera)?;
+        img.save(&a.out)?;
+        println!("{}", a.out.display());
+        return Ok(());
+    }
+    let (cameras, names): (Vec<Camera>, Vec<String>) = if let Some(split) = c.split {
+        let views = scene.split(split);
+        if views.is_empty() {
+            bail!("{}: split {split} has no views", scene.root.display());
+        }
+        views
+            .iter()
+            .map(|&i| (scene.views[i].camera.clone(), format!("{split}_{i:03}.png")))
+            .unzip()
+    } else {
+        let kind = c.path.as_deref().unwrap_or(default_path(&run));
+        let cams = match kind {
+            "spiral" => spiral_for_scene(scene, a.frames),
+            "turntable" => turntable_for_scene(scene, a.frames),
+            other => bail!("unknown --path {other:?} (expected spiral or turntable)"),
+        }
+        .context("the scene has no cameras to build a path from")?;
+        let names = (0..cams.len()).map(|i| format!("frame_{i:04}.png")).collect();
+        (cams, names)
+    };
+    let output = FrameOutput::for_path(&a.out)?;
+    let mut frames = Vec::with_capacity(cameras.len());
+    for (i, cam) in cameras.iter().enumerate() {
+        frames.push(shoot(cam)?);
+        eprint!("\rrendered {}/{}", i + 1, cameras.len());
+    }
+    eprintln!();
+    let written = write_frames(&frames, &names, &output, 12)?;
+    for w in written {
+        println!("{}", w.display());
+    }
+    Ok(())
+}
+
+fn default_path(run: &NerfRun) -> &'static str {
+    match run.scene.format {
+        ins_core::data::SceneFormat::Llff => "spiral",
+        _ => "turntable",
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct EvalNerf {
+    /// Run folder written by `train nerf`.
+    #[arg(long)]
+    run: PathBuf,
+    /// Split to evaluate (default: val, or test where the scene has no val split).
+    #[arg(long)]
+    split: Option<Split>,
+    /// Backend.
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
+}
+
+/// Relative depth error and opacity agreement of two renders of one view.
+fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> (f64, f64, usize) {
+    let mut errors = Vec::new();
+    let mut agree = 0usize;
+    for i in 0..student.opacity.len() {
+        let (os, ot) = (student.opacity[i], teacher.opacity[i]);
+        if (os > 0.5) == (ot > 0.5) {
+            agree += 1;
+        }
+        if os > 0.5 && ot > 0.5 {
+            let (ds, dt) = (student.depth[i] / os, teacher.depth[i] / ot);
+            errors.push(((ds - dt).abs() / dt.abs().max(1e-6)) as f64);
+        }
+    }
+    errors.sort_by(f64::total_cmp);
+    let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
+    (median, agree as f64 / student.opacity.len().max(1) as f64, errors.len())
+}
+
+pub fn eval(a: EvalNerf) -> Result<()> {
+    let device = a.backend.device();
+    let run = NerfRun::load(&a.run, &device)?;
+    let scene = &run.scene;
+    let views: Vec<usize> = match a.split {
+        Some(s) => scene.split(s).to_vec(),
+        None => ins_models::nerf::run::heldout_views(scene),
+    };
+    if views.is_empty() {
+        bail!("{}: no held-out views to evaluate (choose --split)", scene.root.display());
+    }
+    let model = run.model.valid();
+    let stylized = run.base.is_some();
+    let code = run.code(None, &device)?;
+    let evals = evaluate_views(&model, scene, &views, run.sampling(), code, run.background(), &device)?;
+    let teacher = match &run.config.from {
+        Some(from) if stylized => Some(NerfRun::load(from, &device)?),
+        _ => None,
+    };
+    let (mut sum_psnr, mut sum_ssim, mut depth_errors, mut agreements) = (0.0, 0.0, Vec::new(), Vec::new());
+    for e in &evals {
+        let mut line = serde_json::json!({
+            "view": e.view,
+            "psnr": (e.psnr * 1000.0).round() / 1000.0,
+            "ssim": (e.ssim * 10000.0).round() / 10000.0,
+        });
+        if let Some(t) = &teacher {
+            let cam = &scene.views[e.view].camera;
+            let tr = render_camera(&t.model.valid(), &t.scene, cam, t.sampling(), None, t.background(), &device)?;
+            let (median, agree, pixels) = depth_agreement(&e.render, &tr);
+            line["depth_rel_error_median"] = median.into();
+            line["opacity_agreement"] = agree.into();
+            line["opaque_pixels"] = pixels.into();
+            depth_errors.push(median);
+            agreements.push(agree);
+        }
+        println!("{line}");
+        sum_psnr += e.psnr;
+        sum_ssim += e.ssim;
+    }
+    let n = evals.len() as f64;
+    let mut mean = serde_json::json!({
+        "mean": true,
+        "views": evals.len(),
+        "psnr": (sum_psnr / n * 1000.0).round() / 1000.0,
+        "ssim": (sum_ssim / n * 10000.0).round() / 10000.0,
+    });
+    if !depth_errors.is_empty() {
+        mean["depth_rel_error_median"] = (depth_errors.iter().sum::<f64>() / n).into();
+        mean["opacity_agreement"] = (agreements.iter().sum::<f64>() / n).into();
+        mean["note"] = "PSNR/SSIM of a stylized run compare the stylized render with the photos".into();
+    }
+    println!("{mean}");
+    Ok(())
+}

@@ -1,0 +1,537 @@
+//! The multiresolution hash encoding (Müller et al. 2022) as plain Rust over slices: forward,
+//! backward to the table and to the positions, and the spatial Jacobian with its backward.
+//! The Burn op in [`super::op`] runs these on CPU backends; [`super::reference`] computes the
+//! same numbers with ordinary Burn tensor ops, and tests hold the two together.
+//!
+//! Conventions (shared with the reference): positions are in `[0, 1]³` (clamped). Level `l` has
+//! resolution `N_l = ⌊N_min · b^l⌋` with `b = (N_max / N_min)^(1/(L−1))`; its grid has
+//! `N_l + 1` vertices per axis. Point `p` falls in the cell with lower corner
+//! `i = min(⌊p·N_l⌋, N_l − 1)` at fraction `f = p·N_l − i`, and interpolates the 8 corner
+//! vectors trilinearly. A level whose `(N_l + 1)³` vertices fit the table is stored densely
+//! (`x + y·(N_l+1) + z·(N_l+1)²`); finer levels hash (`x ⊕ 2654435761·y ⊕ 805459861·z mod T`).
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Sizes of a hash grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GridShape {
+    /// Levels L.
+    pub levels: u32,
+    /// Features per level F.
+    pub features: u32,
+    /// log2 of the table size T per level.
+    pub log2_table: u32,
+    /// Coarsest resolution N_min.
+    pub base_resolution: u32,
+    /// Finest resolution N_max.
+    pub max_resolution: u32,
+}
+
+/// Where each level lives in the table, and how it is indexed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layout {
+    /// Resolution N_l of each level.
+    pub resolution: Vec<u32>,
+    /// First table row of each level.
+    pub offset: Vec<usize>,
+    /// Rows of each level (≤ T).
+    pub rows: Vec<usize>,
+    /// Whether a level is stored densely (else hashed).
+    pub dense: Vec<bool>,
+    /// Features per row.
+    pub features: usize,
+}
+
+impl GridShape {
+    /// The resolutions, offsets and storage of every level.
+    pub fn layout(&self) -> Layout {
+        let l = self.levels.max(1);
+        let t = 1usize << self.log2_table;
+        let growth = if l > 1 {
+            ((self.max_resolution as f64).ln() - (self.base_resolution as f64).ln()) / (l - 1) as f64
+        } else {
+            0.0
+        };
+        let mut out = Layout {
+            resolution: Vec::new(),
+            offset: Vec::new(),
+            rows: Vec::new(),
+            dense: Vec::new(),
+            features: self.features as usize,
+        };
+        let mut offset = 0;
+        for level in 0..l {
+            // The small epsilon keeps exact powers (16·2^l) from flooring one below.
+            let n = ((self.base_resolution as f64) * (growth * level as f64).exp() + 1e-9).floor() as u32;
+            let n = n.max(1);
+            let vertices = (n as usize + 1).pow(3);
+            let dense = vertices <= t;
+            let rows = if dense { vertices } else { t };
+            out.resolution.push(n);
+            out.offset.push(offset);
+            out.rows.push(rows);
+            out.dense.push(dense);
+            offset += rows;
+        }
+        out
+    }
+
+    /// Width of the encoding: L·F.
+    pub fn d_out(&self) -> usize {
+        (self.levels * self.features) as usize
+    }
+}
+
+impl Layout {
+    /// Total rows of the table.
+    pub fn total_rows(&self) -> usize {
+        self.offset.last().map_or(0, |o| o + self.rows.last().copied().unwrap_or(0))
+    }
+
+    /// Number of levels.
+    pub fn levels(&self) -> usize {
+        self.resolution.len()
+    }
+
+    /// Row of vertex `(x, y, z)` in level `l` (absolute, offset included).
+    #[inline]
+    pub fn row(&self, l: usize, x: u32, y: u32, z: u32) -> usize {
+        let local = if self.dense[l] {
+            let n = self.resolution[l] as usize + 1;
+            x as usize + y as usize * n + z as usize * n * n
+        } else {
+            let h = (x as u64) ^ (y as u64).wrapping_mul(2_654_435_761) ^ (z as u64).wrapping_mul(805_459_861);
+            (h as usize) & (self.rows[l] - 1)
+        };
+        self.offset[l] + local
+    }
+
+    /// The 8 corner rows and trilinear weights of point `p` in level `l` (corner `c` has
+    /// offsets `(c & 1, c >> 1 & 1, c >> 2 & 1)`); the same rows as [`Layout::row`].
+    #[inline]
+    pub fn corner_weights(&self, l: usize, p: &[f32]) -> ([usize; 8], [f32; 8]) {
+        let n = self.resolution[l];
+        let nf = n as f32;
+        let mut i = [0u32; 3];
+        let mut f = [0f32; 3];
+        for k in 0..3 {
+            // Non-negative after the clamp, so truncation is the floor.
+            let x = p[k].clamp(0.0, 1.0) * nf;
+            let c = (x as u32).min(n - 1);
+            i[k] = c;
+            f[k] = x - c as f32;
+        }
+        let g = [1.0 - f[0], 1.0 - f[1], 1.0 - f[2]];
+        let off = self.offset[l];
+        let mut rows = [0usize; 8];
+        if self.dense[l] {
+            let v = n as usize + 1;
+            let base = i[0] as usize + i[1] as usize * v + i[2] as usize * v * v;
+            for (c, r) in rows.iter_mut().enumerate() {
+                *r = off + base + (c & 1) + ((c >> 1) & 1) * v + ((c >> 2) & 1) * v * v;
+            }
+        } else {
+            // Only the low bits survive the mask, so 32-bit wrapping products give the same
+            // rows as the 64-bit hash of `row`.
+            let mask = (self.rows[l] - 1) as u32;
+            let hx = [i[0], i[0] + 1];
+            let hy = [i[1].wrapping_mul(2_654_435_761), (i[1] + 1).wrapping_mul(2_654_435_761)];
+            let hz = [i[2].wrapping_mul(805_459_861), (i[2] + 1).wrapping_mul(805_459_861)];
+            for (c, r) in rows.iter_mut().enumerate() {
+                *r = off + ((hx[c & 1] ^ hy[(c >> 1) & 1] ^ hz[(c >> 2) & 1]) & mask) as usize;
+            }
+        }
+        let mut w = [0f32; 8];
+        for (c, wc) in w.iter_mut().enumerate() {
+            *wc = (if c & 1 == 1 { f[0] } else { g[0] })
+                * (if (c >> 1) & 1 == 1 { f[1] } else { g[1] })
+                * (if (c >> 2) & 1 == 1 { f[2] } else { g[2] });
+        }
+        (rows, w)
+    }
+
+    /// The 8 corner rows and trilinear weights of point `p` in level `l`, with the derivatives
+    /// of the weights with respect to `p` (per axis).
+    #[inline]
+    pub fn corners(&self, l: usize, p: [f32; 3]) -> ([usize; 8], [f32; 8], [[f32; 3]; 8]) {
+        let n = self.resolution[l];
+        let nf = n as f32;
+        let mut i = [0u32; 3];
+        let mut f = [0f32; 3];
+        for k in 0..3 {
+            let x = p[k].clamp(0.0, 1.0) * nf;
+            let c = (x as u32).min(n - 1);
+            i[k] = c;
+            f[k] = x - c as f32;
+        }
+        let mut rows = [0usize; 8];
+        let mut w = [0f32; 8];
+        let mut dw = [[0f32; 3]; 8];
+        for c in 0..8 {
+            let b = [(c & 1) as u32, ((c >> 1) & 1) as u32, ((c >> 2) & 1) as u32];
+            rows[c] = self.row(l, i[0] + b[0], i[1] + b[1], i[2] + b[2]);
+            let t: [f32; 3] = std::array::from_fn(|k| if b[k] == 1 { f[k] } else { 1.0 - f[k] });
+            let s: [f32; 3] = std::array::from_fn(|k| if b[k] == 1 { nf } else { -nf });
+            w[c] = t[0] * t[1] * t[2];
+            dw[c] = [s[0] * t[1] * t[2], t[0] * s[1] * t[2], t[0] * t[1] * s[2]];
+        }
+        (rows, w, dw)
+    }
+}
+
+const CHUNK: usize = 1024;
+
+/// Encodes `n` points (`positions`: `n·3`) into `out` (`n·L·F`, row major).
+///
+/// The lookups are random, so cache decides the speed: each thread takes a contiguous share of
+/// the points and runs level by level over all of them, so one level's table stays in the
+/// core's cache for a whole pass. Results go to a level-major scratch buffer (contiguous
+/// writes) that is transposed into `out` at the end.
+pub fn forward(layout: &Layout, table: &[f32], positions: &[f32], out: &mut [f32]) {
+    let (levels, nf) = (layout.levels(), layout.features);
+    let n = positions.len() / 3;
+    let mut scratch = vec![0f32; levels * n * nf];
+    let share = n.div_ceil(rayon::current_num_threads().max(1)).max(CHUNK);
+    // scratch[l][i] for the points of each share: split every level's block by share.
+    let mut blocks: Vec<Vec<&mut [f32]>> = (0..n.div_ceil(share)).map(|_| Vec::with_capacity(levels)).collect();
+    for level_block in scratch.chunks_mut(n * nf) {
+        for (s, part) in level_block.chunks_mut(share * nf).enumerate() {
+            blocks[s].push(part);
+        }
+    }
+    blocks
+        .into_par_iter()
+        .zip(positions.par_chunks(3 * share))
+        .for_each(|(mut parts, pos)| {
+            for (l, dst) in parts.iter_mut().enumerate() {
+                for (d, p) in dst.chunks_exact_mut(nf).zip(pos.chunks_exact(3)) {
+                    let (rows, w) = layout.corner_weights(l, p);
+                    if nf == 2 {
+                        let (mut a, mut b) = (0f32, 0f32);
+                        for c in 0..8 {
+                            let r = rows[c] * 2;
+                            a += w[c] * table[r];
+                            b += w[c] * table[r + 1];
+                        }
+                        d[0] = a;
+                        d[1] = b;
+                    } else {
+                        d.fill(0.0);
+                        for c in 0..8 {
+                            let src = &table[rows[c] * nf..(rows[c] + 1) * nf];
+                            for (x, s) in d.iter_mut().zip(src) {
+                                *x += w[c] * s;
+                            }
+                        }
+                    }
+                }
+            }
+        });
+    // Level-major scratch → point-major output.
+    let width = levels * nf;
+    out.par_chunks_mut(width * CHUNK).enumerate().for_each(|(ci, o)| {
+        let first = ci * CHUNK;
+        for (k, row) in o.chunks_exact_mut(width).enumerate() {
+            let i = first + k;
+            for l in 0..levels {
+                let src = &scratch[(l * n + i) * nf..(l * n + i + 1) * nf];
+                row[l * nf..(l + 1) * nf].copy_from_slice(src);
+            }
+        }
+    });
+}
+
+/// Splits the table into per-level slices so levels can be accumulated in parallel.
+fn level_slices<'a>(layout: &Layout, table: &'a mut [f32]) -> Vec<&'a mut [f32]> {
+    let nf = layout.features;
+    let mut rest = table;
+    let mut out = Vec::with_capacity(layout.levels());
+    for l in 0..layout.levels() {
+        let (head, tail) = rest.split_at_mut(layout.rows[l] * nf);
+        out.push(head);
+        rest = tail;
+    }
+    out
+}
+
+/// Adds `∂L/∂table` for upstream `grad_out` (`n·L·F`) into `grad_table` (zeroed by the caller).
+///
+/// The upstream gradient is first transposed to level-major order (one pass); then the levels,
+/// which own disjoint rows, accumulate in parallel, each streaming its contiguous gradient
+/// block while its table stays in cache.
+pub fn backward_table(layout: &Layout, positions: &[f32], grad_out: &[f32], grad_table: &mut [f32]) {
+    let (levels, nf) = (layout.levels(), layout.features);
+    let n = positions.len() / 3;
+    let width = levels * nf;
+    let mut by_level = vec![0f32; levels * n * nf];
+    by_level.par_chunks_mut(n * nf).enumerate().for_each(|(l, dst)| {
+        for (d, g) in dst.chunks_exact_mut(nf).zip(grad_out.chunks_exact(width)) {
+            d.copy_from_slice(&g[l * nf..(l + 1) * nf]);
+        }
+    });
+    level_slices(layout, grad_table)
+        .into_par_iter()
+        .zip(by_level.par_chunks(n * nf))
+        .enumerate()
+        .for_each(|(l, (g, go))| {
+            let off = layout.offset[l];
+            for (p, go) in positions.chunks_exact(3).zip(go.chunks_exact(nf)) {
+                if go.iter().all(|v| *v == 0.0) {
+                    continue;
+                }
+                let (rows, w) = layout.corner_weights(l, p);
+                for c in 0..8 {
+                    let dst = &mut g[(rows[c] - off) * nf..(rows[c] - off + 1) * nf];
+                    for (d, s) in dst.iter_mut().zip(go) {
+                        *d += w[c] * s;
+                    }
+                }
+            }
+        });
+}
+
+/// `∂L/∂positions` (`n·3`) for upstream `grad_out`.
+pub fn backward_positions(
+    layout: &Layout,
+    table: &[f32],
+    positions: &[f32],
+    grad_out: &[f32],
+    grad_positions: &mut [f32],
+) {
+    let (levels, nf) = (layout.levels(), layout.features);
+    let width = levels * nf;
+    grad_positions
+        .par_chunks_mut(3 * CHUNK)
+        .zip(positions.par_chunks(3 * CHUNK))
+        .zip(grad_out.par_chunks(width * CHUNK))
+        .for_each(|((gp, pos), go)| {
+            for ((gp, p), go) in gp.chunks_exact_mut(3).zip(pos.chunks_exact(3)).zip(go.chunks_exact(width)) {
+                let mut acc = [0f32; 3];
+                let p = [p[0], p[1], p[2]];
+                for l in 0..levels {
+                    let (rows, _, dw) = layout.corners(l, p);
+                    let go = &go[l * nf..(l + 1) * nf];
+                    for c in 0..8 {
+                        let src = &table[rows[c] * nf..(rows[c] + 1) * nf];
+                        let dot: f32 = src.iter().zip(go).map(|(a, b)| a * b).sum();
+                        for k in 0..3 {
+                            acc[k] += dw[c][k] * dot;
+                        }
+                    }
+                }
+                // Clamped coordinates do not move the encoding.
+                for k in 0..3 {
+                    gp[k] = if (0.0..=1.0).contains(&p[k]) { acc[k] } else { 0.0 };
+                }
+            }
+        });
+}
+
+/// The spatial Jacobian `∂out/∂p` into `jac` (`n·L·F·3`, the 3 axes last).
+pub fn jacobian(layout: &Layout, table: &[f32], positions: &[f32], jac: &mut [f32]) {
+    let (levels, nf) = (layout.levels(), layout.features);
+    let width = levels * nf * 3;
+    jac.par_chunks_mut(width * CHUNK)
+        .zip(positions.par_chunks(3 * CHUNK))
+        .for_each(|(jac, pos)| {
+            for (j, p) in jac.chunks_exact_mut(width).zip(pos.chunks_exact(3)) {
+                let p = [p[0], p[1], p[2]];
+                j.fill(0.0);
+                for l in 0..levels {
+                    let (rows, _, dw) = layout.corners(l, p);
+                    for c in 0..8 {
+                        let src = &table[rows[c] * nf..(rows[c] + 1) * nf];
+                        for (fi, s) in src.iter().enumerate() {
+                            for k in 0..3 {
+                                j[(l * nf + fi) * 3 + k] += dw[c][k] * s;
+                            }
+                        }
+                    }
+                }
+                for k in 0..3 {
+                    if !(0.0..=1.0).contains(&p[k]) {
+                        for e in 0..levels * nf {
+                            j[e * 3 + k] = 0.0;
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// Adds `∂L/∂table` for upstream `grad_jac` (`n·L·F·3`) of [`jacobian`] into `grad_table`.
+pub fn jacobian_backward_table(
+    layout: &Layout,
+    positions: &[f32],
+    grad_jac: &[f32],
+    grad_table: &mut [f32],
+) {
+    let (levels, nf) = (layout.levels(), layout.features);
+    let width = levels * nf * 3;
+    level_slices(layout, grad_table)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(l, g)| {
+            let off = layout.offset[l];
+            for (p, gj) in positions.chunks_exact(3).zip(grad_jac.chunks_exact(width)) {
+                let p = [p[0], p[1], p[2]];
+                let inside: [f32; 3] =
+                    std::array::from_fn(|k| if (0.0..=1.0).contains(&p[k]) { 1.0 } else { 0.0 });
+                let (rows, _, dw) = layout.corners(l, p);
+                for c in 0..8 {
+                    let dst = &mut g[(rows[c] - off) * nf..(rows[c] - off + 1) * nf];
+                    for (fi, d) in dst.iter_mut().enumerate() {
+                        let e = (l * nf + fi) * 3;
+                        *d += (0..3).map(|k| dw[c][k] * inside[k] * gj[e + k]).sum::<f32>();
+                    }
+                }
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shape() -> GridShape {
+        GridShape {
+            levels: 4,
+            features: 2,
+            log2_table: 8,
+            base_resolution: 2,
+            max_resolution: 16,
+        }
+    }
+
+    fn table(layout: &Layout, seed: u32) -> Vec<f32> {
+        (0..layout.total_rows() * layout.features)
+            .map(|i| (((i as u32).wrapping_mul(2_654_435_761) ^ seed) % 1000) as f32 / 500.0 - 1.0)
+            .collect()
+    }
+
+    #[test]
+    fn layout_grows_geometrically_and_hashes_fine_levels() {
+        let l = shape().layout();
+        assert_eq!(l.resolution, [2, 4, 8, 16]);
+        assert_eq!(l.dense, [true, true, false, false]);
+        assert_eq!(l.rows, [27, 125, 256, 256]);
+        assert_eq!(l.offset, [0, 27, 152, 408]);
+        assert_eq!(l.total_rows(), 664);
+    }
+
+    #[test]
+    fn fast_corner_rows_agree_with_the_reference_hash() {
+        let layout = shape().layout();
+        for p in points().chunks_exact(3) {
+            for l in 0..4 {
+                let (rows, w) = layout.corner_weights(l, p);
+                let (rows2, w2, _) = layout.corners(l, [p[0], p[1], p[2]]);
+                assert_eq!(rows, rows2);
+                for c in 0..8 {
+                    assert!((w[c] - w2[c]).abs() < 1e-6);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn interpolation_is_exact_at_vertices_and_linear_between() {
+        let layout = shape().layout();
+        let t = table(&layout, 1);
+        let mut out = vec![0.0; 8];
+        // At a vertex of every level (the origin), the encoding is the vertex's vector.
+        forward(&layout, &t, &[0.0, 0.0, 0.0], &mut out);
+        for l in 0..4 {
+            let r = layout.row(l, 0, 0, 0);
+            assert_eq!(&out[l * 2..l * 2 + 2], &t[r * 2..r * 2 + 2]);
+        }
+        // Midway along x in level 0 (resolution 2): the mean of two vertices.
+        forward(&layout, &t, &[0.25, 0.0, 0.0], &mut out);
+        let (a, b) = (layout.row(0, 0, 0, 0), layout.row(0, 1, 0, 0));
+        for f in 0..2 {
+            let want = 0.5 * (t[a * 2 + f] + t[b * 2 + f]);
+            assert!((out[f] - want).abs() < 1e-6);
+        }
+    }
+
+    /// Points away from every level's cell boundaries (finite differences cross no kink).
+    fn points() -> Vec<f32> {
+        vec![0.13, 0.71, 0.42, 0.9, 0.05, 0.33, 0.47, 0.53, 0.77, 0.011, 0.99, 0.6]
+    }
+
+    #[test]
+    fn gradients_match_finite_differences() {
+        let layout = shape().layout();
+        let t = table(&layout, 2);
+        let p = points();
+        let n = p.len() / 3;
+        let width = 8;
+        // A fixed linear functional of the output.
+        let g: Vec<f32> = (0..n * width).map(|i| ((i * 7) % 5) as f32 - 2.0).collect();
+        let loss = |t: &[f32], p: &[f32]| {
+            let mut out = vec![0.0; n * width];
+            forward(&layout, t, p, &mut out);
+            out.iter().zip(&g).map(|(a, b)| (a * b) as f64).sum::<f64>()
+        };
+        let mut gt = vec![0.0; t.len()];
+        backward_table(&layout, &p, &g, &mut gt);
+        let eps = 1e-2;
+        for i in (0..t.len()).step_by(7) {
+            let mut tp = t.clone();
+            tp[i] += eps;
+            let mut tm = t.clone();
+            tm[i] -= eps;
+            let fd = (loss(&tp, &p) - loss(&tm, &p)) / (2.0 * eps as f64);
+            assert!((fd as f32 - gt[i]).abs() < 1e-3, "table {i}: {fd} vs {}", gt[i]);
+        }
+        let mut gp = vec![0.0; p.len()];
+        backward_positions(&layout, &t, &p, &g, &mut gp);
+        let eps = 1e-4;
+        for i in 0..p.len() {
+            let mut pp = p.clone();
+            pp[i] += eps;
+            let mut pm = p.clone();
+            pm[i] -= eps;
+            let fd = (loss(&t, &pp) - loss(&t, &pm)) / (2.0 * eps as f64);
+            assert!((fd as f32 - gp[i]).abs() < 2e-2 * (1.0 + fd.abs() as f32), "position {i}: {fd} vs {}", gp[i]);
+        }
+    }
+
+    #[test]
+    fn jacobian_matches_finite_differences_and_its_backward_is_its_transpose() {
+        let layout = shape().layout();
+        let t = table(&layout, 3);
+        let p = points();
+        let n = p.len() / 3;
+        let mut jac = vec![0.0; n * 8 * 3];
+        jacobian(&layout, &t, &p, &mut jac);
+        let eps = 1e-4;
+        for i in 0..n {
+            for k in 0..3 {
+                let mut pp = p.clone();
+                pp[i * 3 + k] += eps;
+                let mut pm = p.clone();
+                pm[i * 3 + k] -= eps;
+                let (mut a, mut b) = (vec![0.0; n * 8], vec![0.0; n * 8]);
+                forward(&layout, &t, &pp, &mut a);
+                forward(&layout, &t, &pm, &mut b);
+                for e in 0..8 {
+                    let fd = (a[i * 8 + e] - b[i * 8 + e]) / (2.0 * eps);
+                    let j = jac[(i * 8 + e) * 3 + k];
+                    assert!((fd - j).abs() < 2e-2 * (1.0 + j.abs()), "point {i} axis {k}: {fd} vs {j}");
+                }
+            }
+        }
+        // The Jacobian is linear in the table: its backward is the adjoint.
+        let gj: Vec<f32> = (0..jac.len()).map(|i| ((i * 3) % 7) as f32 - 3.0).collect();
+        let mut gt = vec![0.0; t.len()];
+        jacobian_backward_table(&layout, &p, &gj, &mut gt);
+        let dt: Vec<f32> = (0..t.len()).map(|i| ((i * 5) % 11) as f32 / 11.0 - 0.5).collect();
+        let mut jd = vec![0.0; jac.len()];
+        jacobian(&layout, &dt, &p, &mut jd);
+        let lhs: f64 = jd.iter().zip(&gj).map(|(a, b)| (a * b) as f64).sum();
+        let rhs: f64 = gt.iter().zip(&dt).map(|(a, b)| (a * b) as f64).sum();
+        assert!((lhs - rhs).abs() < 1e-3 * (1.0 + lhs.abs()), "{lhs} vs {rhs}");
+    }
+}

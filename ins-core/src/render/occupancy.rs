@@ -1,0 +1,306 @@
+//! An occupancy grid (instant-ngp): a cube of cells over the scene's box, each holding a decayed
+//! running maximum of the field's density and one bit "worth sampling". Marching a ray skips
+//! cells whose bit is off, so empty space costs nothing.
+//!
+//! The grid is refreshed from the model every few steps ([`OccupancyGrid::update`]): a random
+//! point in each chosen cell is evaluated, `density ← max(decay · density, new)`, and a cell is
+//! occupied when `density · step > min(threshold, mean)` (nerfacc's rule), so a sample whose
+//! cell has recorded a density above the threshold is never culled.
+
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::geometry::Vec3;
+use super::rays::Rays;
+
+/// A density grid with occupancy bits.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct OccupancyGrid {
+    /// Cells per axis.
+    pub resolution: u32,
+    /// Box minimum corner.
+    pub min: [f32; 3],
+    /// Box maximum corner.
+    pub max: [f32; 3],
+    /// Running maximum of the density per cell (x fastest, then y, then z).
+    pub density: Vec<f32>,
+    /// Occupancy bit per cell.
+    pub occupied: Vec<bool>,
+    /// Ray-marching step (distance between samples along a unit ray).
+    pub step: f32,
+    /// Occupancy threshold on `density · step` (an opacity of about 1 %).
+    pub threshold: f32,
+    /// Decay of the running maximum per update.
+    pub decay: f32,
+}
+
+/// Samples produced by marching rays through a grid: only those in occupied cells.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MarchedSamples {
+    /// Ray of each sample.
+    pub ray: Vec<u32>,
+    /// Distance along the ray.
+    pub t: Vec<f32>,
+    /// Length of ray the sample stands for.
+    pub delta: Vec<f32>,
+    /// First sample of each ray, plus one past the end (`rays + 1` entries).
+    pub offsets: Vec<u32>,
+}
+
+impl MarchedSamples {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// The most samples any ray got.
+    pub fn max_per_ray(&self) -> usize {
+        self.offsets
+            .windows(2)
+            .map(|w| (w[1] - w[0]) as usize)
+            .max()
+            .unwrap_or(0)
+    }
+}
+
+impl OccupancyGrid {
+    /// A grid over `[min, max]` with every cell occupied (so the first steps sample everywhere),
+    /// marching with `step`.
+    pub fn new(resolution: u32, min: Vec3, max: Vec3, step: f32) -> Self {
+        let n = (resolution as usize).pow(3);
+        Self {
+            resolution,
+            min: min.to_array(),
+            max: max.to_array(),
+            density: vec![f32::MAX / 2.0; n],
+            occupied: vec![true; n],
+            step,
+            threshold: 0.01,
+            decay: 0.95,
+        }
+    }
+
+    /// A step of half a cell along the box's longest side: fine enough that no cell is
+    /// skipped between samples.
+    pub fn default_step(resolution: u32, min: Vec3, max: Vec3) -> f32 {
+        (max - min).max_element() / resolution as f32 * 0.5
+    }
+
+    fn cell_size(&self) -> Vec3 {
+        (Vec3::from(self.max) - Vec3::from(self.min)) / self.resolution as f32
+    }
+
+    /// The cell containing `p`, if inside the box.
+    pub fn cell_of(&self, p: Vec3) -> Option<usize> {
+        let rel = (p - Vec3::from(self.min)) / self.cell_size();
+        if rel.cmplt(Vec3::ZERO).any() || rel.cmpge(Vec3::splat(self.resolution as f32)).any() {
+            return None;
+        }
+        let r = self.resolution as usize;
+        Some(rel.x as usize + rel.y as usize * r + rel.z as usize * r * r)
+    }
+
+    /// Whether `p` lies in an occupied cell.
+    pub fn is_occupied(&self, p: Vec3) -> bool {
+        self.cell_of(p).is_some_and(|c| self.occupied[c])
+    }
+
+    /// Fraction of occupied cells.
+    pub fn occupancy(&self) -> f32 {
+        self.occupied.iter().filter(|&&o| o).count() as f32 / self.occupied.len().max(1) as f32
+    }
+
+    /// Refreshes the grid: evaluates `density_at` (positions `[n·3]` → densities `[n]`) at a
+    /// random point of `cells` chosen cells (every cell when `cells` covers the grid; else half
+    /// uniformly, half among occupied ones), decays and updates the running maxima and bits.
+    pub fn update(
+        &mut self,
+        cells: usize,
+        seed: u64,
+        mut density_at: impl FnMut(&[f32]) -> Vec<f32>,
+    ) {
+        let total = self.density.len();
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let chosen: Vec<usize> = if cells >= total {
+            (0..total).collect()
+        } else {
+            let occupied: Vec<usize> = (0..total).filter(|&c| self.occupied[c]).collect();
+            (0..cells)
+                .map(|i| {
+                    if i % 2 == 1 && !occupied.is_empty() {
+                        occupied[rng.random_range(0..occupied.len())]
+                    } else {
+                        rng.random_range(0..total)
+                    }
+                })
+                .collect()
+        };
+        let r = self.resolution as usize;
+        let size = self.cell_size();
+        let min = Vec3::from(self.min);
+        let mut points = Vec::with_capacity(chosen.len() * 3);
+        for &c in &chosen {
+            let idx = Vec3::new((c % r) as f32, ((c / r) % r) as f32, (c / (r * r)) as f32);
+            let jitter = Vec3::new(rng.random(), rng.random(), rng.random());
+            points.extend((min + (idx + jitter) * size).to_array());
+        }
+        let new = density_at(&points);
+        // Decay everything once, then raise the evaluated cells (a cell chosen twice keeps its
+        // larger value).
+        for d in &mut self.density {
+            *d = if *d >= f32::MAX / 4.0 { 0.0 } else { *d * self.decay };
+        }
+        for (&c, &v) in chosen.iter().zip(&new) {
+            let v = if v.is_finite() { v.max(0.0) } else { 0.0 };
+            self.density[c] = self.density[c].max(v);
+        }
+        let mean = self.density.iter().map(|&d| (d * self.step) as f64).sum::<f64>() / total as f64;
+        let threshold = self.threshold.min(mean as f32);
+        for (o, &d) in self.occupied.iter_mut().zip(&self.density) {
+            *o = d * self.step > threshold;
+        }
+    }
+
+    /// Marches every ray from its `near` to its `far` (clipped to the box) in steps of
+    /// [`OccupancyGrid::step`] (divided by the ray direction's length, so non-unit NDC rays
+    /// step evenly), keeping at most `max_per_ray` samples in occupied cells. Each ray's first
+    /// sample is offset by a uniform fraction of a step drawn from `seed` (`None`: half a step).
+    pub fn march(&self, rays: &Rays, max_per_ray: usize, seed: Option<u64>) -> MarchedSamples {
+        let bounds = super::geometry::Bounds::Aabb {
+            min: Vec3::from(self.min),
+            max: Vec3::from(self.max),
+        };
+        let per_ray: Vec<Vec<(f32, f32)>> = (0..rays.len())
+            .into_par_iter()
+            .map(|i| {
+                let (o, d) = (rays.origins[i], rays.directions[i]);
+                let len = d.length();
+                if len <= 0.0 {
+                    return Vec::new();
+                }
+                let Some((b0, b1)) = bounds.intersect(o, d) else {
+                    return Vec::new();
+                };
+                let t0 = rays.near[i].max(b0);
+                let t1 = rays.far[i].min(b1);
+                let dt = self.step / len;
+                let offset = match seed {
+                    Some(s) => SmallRng::seed_from_u64(s ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+                        .random::<f32>(),
+                    None => 0.5,
+                };
+                let mut out = Vec::new();
+                let mut t = t0 + offset * dt;
+                while t < t1 && out.len() < max_per_ray {
+                    if self.is_occupied(o + d * t) {
+                        out.push((t, dt));
+                    }
+                    t += dt;
+                }
+                out
+            })
+            .collect();
+        let mut s = MarchedSamples {
+            offsets: Vec::with_capacity(rays.len() + 1),
+            ..Default::default()
+        };
+        s.offsets.push(0);
+        for (i, samples) in per_ray.into_iter().enumerate() {
+            for (t, dt) in samples {
+                s.ray.push(i as u32);
+                s.t.push(t);
+                s.delta.push(dt);
+            }
+            s.offsets.push(s.t.len() as u32);
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Density 10 inside the cube `[0.2, 0.5]³` (aligned with cells of a 10³ grid over
+    /// `[0, 1]³`), 0 elsewhere.
+    fn cube_density(points: &[f32]) -> Vec<f32> {
+        points
+            .chunks_exact(3)
+            .map(|p| {
+                let inside = p.iter().all(|&v| (0.2..0.5).contains(&v));
+                if inside { 10.0 } else { 0.0 }
+            })
+            .collect()
+    }
+
+    fn grid() -> OccupancyGrid {
+        let mut g = OccupancyGrid::new(10, Vec3::ZERO, Vec3::ONE, 0.01);
+        g.update(usize::MAX, 1, cube_density);
+        g
+    }
+
+    #[test]
+    fn a_full_update_marks_exactly_the_dense_cells() {
+        let g = grid();
+        assert_eq!(g.occupied.iter().filter(|&&o| o).count(), 27);
+        assert!(g.is_occupied(Vec3::splat(0.35)));
+        assert!(!g.is_occupied(Vec3::splat(0.75)));
+    }
+
+    #[test]
+    fn marching_never_culls_a_sample_with_density_above_the_threshold() {
+        let g = grid();
+        let mut rays = Rays::default();
+        let mut rng = SmallRng::seed_from_u64(9);
+        for _ in 0..300 {
+            let o = Vec3::new(rng.random(), rng.random(), -1.0);
+            let target = Vec3::new(rng.random(), rng.random(), rng.random());
+            rays.push(o, (target - o).normalize(), 0.0, 4.0);
+        }
+        let kept = g.march(&rays, 10_000, Some(2));
+        // Every point of a dense ray segment is kept: compare with marching an all-occupied
+        // grid and keeping samples whose true density is positive.
+        let mut all = g.clone();
+        all.occupied.fill(true);
+        let every = all.march(&rays, 10_000, Some(2));
+        let dense: Vec<(u32, f32)> = every
+            .ray
+            .iter()
+            .zip(&every.t)
+            .filter(|&(&r, &t)| {
+                let p = rays.point(r as usize, t);
+                cube_density(&p.to_array())[0] > 0.0
+            })
+            .map(|(&r, &t)| (r, t))
+            .collect();
+        assert!(!dense.is_empty());
+        let kept_set: Vec<(u32, f32)> = kept.ray.iter().copied().zip(kept.t.iter().copied()).collect();
+        for s in &dense {
+            assert!(kept_set.contains(s), "dense sample {s:?} was culled");
+        }
+        // And empty space costs nothing: far fewer samples than marching everything.
+        assert!(kept.len() * 3 < every.len(), "{} of {}", kept.len(), every.len());
+    }
+
+    #[test]
+    fn decay_forgets_density_that_moved_away() {
+        let mut g = grid();
+        let moved = |points: &[f32]| -> Vec<f32> {
+            let shifted: Vec<f32> = points.iter().map(|v| v - 0.4).collect();
+            cube_density(&shifted)
+        };
+        for s in 0..100 {
+            g.update(usize::MAX, 10 + s, moved);
+        }
+        assert!(!g.is_occupied(Vec3::splat(0.35)), "the old cube is still occupied");
+        assert!(g.is_occupied(Vec3::splat(0.75)), "the new cube is not occupied");
+        assert_eq!(g.occupied.iter().filter(|&&o| o).count(), 27);
+    }
+}

@@ -1,0 +1,197 @@
+//! The configuration of a NeRF run: `ins-cli train nerf` flags and the run's `config.json`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+use ins_core::modules::field::CimKind;
+use serde::{Deserialize, Serialize};
+
+use super::model::NerfArch;
+
+/// Everything that defines a NeRF run, pretraining (`--scene`) or stylization (`--from`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
+#[serde(default, deny_unknown_fields)]
+pub struct NerfRunConfig {
+    /// Scene folder (Blender, LLFF or DTU) to pretrain on.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Pretrained NeRF run to stylize (its scene, model and occupancy grid are reused).
+    #[arg(long)]
+    pub from: Option<PathBuf>,
+    /// Style image; repeat for a conditional multi-style model (stylization only).
+    #[arg(long = "style")]
+    pub styles: Vec<PathBuf>,
+    /// Content module: grid (fast, default) or mlp (the paper's NeRF, slow on a CPU).
+    #[arg(long, default_value = "grid")]
+    pub cim: CimKind,
+    /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
+    #[arg(long, default_value_t = 0)]
+    pub downscale: u32,
+    /// Training steps (pretraining or stylization).
+    #[arg(long, default_value_t = 0)]
+    pub steps: usize,
+    /// Adam learning rate (0: 1e-2 for grid, 5e-4 for mlp pretraining; 1e-3 / 1e-4 stylizing).
+    #[arg(long, default_value_t = 0.0)]
+    pub lr: f64,
+    /// Grid: fine samples per step the ray count adapts to.
+    #[arg(long, default_value_t = 1 << 17)]
+    pub target_samples: usize,
+    /// MLP: rays per step.
+    #[arg(long, default_value_t = 1024)]
+    pub rays: usize,
+    /// MLP: stratified (coarse) samples per ray.
+    #[arg(long, default_value_t = 64)]
+    pub coarse_samples: usize,
+    /// MLP: importance (fine) samples per ray.
+    #[arg(long, default_value_t = 128)]
+    pub fine_samples: usize,
+    /// Grid: log2 of the hash table size per level.
+    #[arg(long, default_value_t = 17)]
+    pub log2_table: u32,
+    /// Grid: finest resolution.
+    #[arg(long, default_value_t = 1024)]
+    pub max_resolution: u32,
+    /// Occupancy grid cells per axis.
+    #[arg(long, default_value_t = 128)]
+    pub occupancy_resolution: u32,
+    /// Steps between occupancy grid refreshes.
+    #[arg(long, default_value_t = 16)]
+    pub occupancy_every: usize,
+    /// Cap of samples per ray when marching.
+    #[arg(long, default_value_t = 512)]
+    pub max_samples_per_ray: usize,
+    /// Steps between evaluations on held-out views (0: only at the end).
+    #[arg(long, default_value_t = 500)]
+    pub eval_every: usize,
+    /// Held-out views rendered per evaluation during training.
+    #[arg(long, default_value_t = 4)]
+    pub eval_views: usize,
+    /// Stylization: rays per patch side (K).
+    #[arg(long, default_value_t = 64)]
+    pub patch: usize,
+    /// Stylization: pixels between patch rays (0: chosen so the window spans half the image).
+    #[arg(long, default_value_t = 0)]
+    pub stride: usize,
+    /// Stylization: longer side of the style images for their Gram targets.
+    #[arg(long, default_value_t = 256)]
+    pub style_size: usize,
+    /// Stylization: style loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    pub style_weight: Option<f64>,
+    /// Stylization: content loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    pub content_weight: Option<f64>,
+    /// Stylization: weight of the geometry loss mean|σ_teacher − σ|.
+    #[arg(long, default_value_t = 1.0)]
+    pub geometry_weight: f64,
+    /// Stylization: also stylize the density (the paper); off keeps the pretrained density.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub stylize_density: bool,
+    /// Stylization: SIM width (0: 64 for grid, 256 for mlp).
+    #[arg(long, default_value_t = 0)]
+    pub sim_width: usize,
+    /// Stylization: octaves of the position encoding fed to the SIM.
+    #[arg(long, default_value_t = 4)]
+    pub position_freqs: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Steps between checkpoints.
+    #[arg(long, default_value_t = 500)]
+    pub checkpoint_every: usize,
+}
+
+impl Default for NerfRunConfig {
+    fn default() -> Self {
+        crate::config::clap_defaults()
+    }
+}
+
+/// Whether a run pretrains a field or stylizes a pretrained one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunKind {
+    /// `--scene`.
+    Pretrain,
+    /// `--from`.
+    Stylize,
+}
+
+impl NerfRunConfig {
+    /// Reads a run's `config.json`.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        crate::config::read_json(path)
+    }
+
+    /// Which kind of run this is; an error when both or neither of `--scene` and `--from` are
+    /// given, or styles come without `--from`.
+    pub fn kind(&self) -> Result<RunKind> {
+        match (&self.scene, &self.from) {
+            (Some(_), None) => {
+                if !self.styles.is_empty() {
+                    bail!("--style needs --from RUN (stylize a pretrained NeRF); pretrain with --scene first");
+                }
+                Ok(RunKind::Pretrain)
+            }
+            (None, Some(_)) => {
+                if self.styles.is_empty() {
+                    bail!("stylizing (--from) needs at least one --style image");
+                }
+                Ok(RunKind::Stylize)
+            }
+            (Some(_), Some(_)) => bail!("give either --scene (pretrain) or --from (stylize), not both"),
+            (None, None) => bail!("give --scene DIR to pretrain a NeRF, or --from RUN --style IMG to stylize one"),
+        }
+    }
+
+    /// The model sizes.
+    pub fn arch(&self) -> NerfArch {
+        NerfArch {
+            cim: self.cim,
+            log2_table: self.log2_table,
+            max_resolution: self.max_resolution,
+        }
+    }
+
+    /// Steps to run (the default depends on the kind and the content module).
+    pub fn steps_for(&self, kind: RunKind) -> usize {
+        if self.steps > 0 {
+            return self.steps;
+        }
+        match (kind, self.cim) {
+            (RunKind::Pretrain, CimKind::Grid) => 2500,
+            (RunKind::Pretrain, CimKind::Mlp) => 200_000,
+            (RunKind::Stylize, CimKind::Grid) => 600,
+            (RunKind::Stylize, CimKind::Mlp) => 50_000,
+        }
+    }
+
+    /// Learning rate (the default depends on the kind and the content module).
+    pub fn lr_for(&self, kind: RunKind) -> f64 {
+        if self.lr > 0.0 {
+            return self.lr;
+        }
+        match (kind, self.cim) {
+            (RunKind::Pretrain, CimKind::Grid) => 1e-2,
+            (RunKind::Pretrain, CimKind::Mlp) => 5e-4,
+            (RunKind::Stylize, CimKind::Grid) => 1e-3,
+            (RunKind::Stylize, CimKind::Mlp) => 1e-4,
+        }
+    }
+
+    /// SIM width.
+    pub fn sim_width_for(&self) -> usize {
+        if self.sim_width > 0 {
+            self.sim_width
+        } else if self.cim == CimKind::Grid {
+            64
+        } else {
+            256
+        }
+    }
+}
+
+/// The downscale that brings the longer side of `width × height` to at most `max_side`.
+pub fn auto_downscale(width: u32, height: u32, max_side: u32) -> u32 {
+    let long = width.max(height).max(1);
+    long.div_ceil(max_side.max(1)).max(1)
+}

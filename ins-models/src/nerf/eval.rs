@@ -1,0 +1,192 @@
+//! Rendering whole views in chunks (bounded memory at any resolution) and scoring them against
+//! the held-out photos: PSNR, SSIM, and a picture (photo | render | depth) per view.
+
+use std::path::Path;
+
+use anyhow::Result;
+use burn::prelude::*;
+use ins_core::data::Scene;
+use ins_core::imaging::{RgbImage, depth_image};
+use ins_core::loss::{psnr, ssim};
+use ins_core::render::camera::Camera;
+use ins_core::render::rays::camera_rays;
+
+use super::model::NerfModel;
+use super::render::{RenderRays, Sampling, render};
+
+/// Rays per chunk when rendering whole images.
+pub const CHUNK: usize = 8192;
+
+/// A rendered image with its depth and opacity.
+#[derive(Debug, Clone)]
+pub struct ViewRender {
+    /// Width.
+    pub width: usize,
+    /// Height.
+    pub height: usize,
+    /// RGB, `h·w·3`.
+    pub rgb: Vec<f32>,
+    /// Expected ray distance (not divided by opacity), `h·w`.
+    pub depth: Vec<f32>,
+    /// Opacity, `h·w`.
+    pub opacity: Vec<f32>,
+}
+
+impl ViewRender {
+    /// The colour as an image.
+    pub fn image(&self) -> RgbImage {
+        RgbImage {
+            width: self.width,
+            height: self.height,
+            data: self.rgb.clone(),
+        }
+    }
+
+    /// The depth as a colour-mapped image over the opaque pixels' range.
+    pub fn depth_picture(&self) -> RgbImage {
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (d, o) in self.depth.iter().zip(&self.opacity) {
+            if *o > 0.5 {
+                lo = lo.min(d / o);
+                hi = hi.max(d / o);
+            }
+        }
+        if !lo.is_finite() {
+            (lo, hi) = (0.0, 1.0);
+        }
+        depth_image(&self.depth, &self.opacity, self.width, self.height, lo, hi)
+    }
+}
+
+fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| anyhow::anyhow!("reading a render: {e:?}"))
+}
+
+/// Renders `rays` (an image's rays, row major) in chunks of [`CHUNK`] with a fixed sampling
+/// (no jitter). `code` is one style code `[1, n_styles]` or `None` for the unstylized field.
+#[allow(clippy::too_many_arguments)]
+pub fn render_rays(
+    model: &NerfModel,
+    rays: &RenderRays,
+    width: usize,
+    height: usize,
+    sampling: Sampling,
+    code: Option<Tensor<2>>,
+    background: [f32; 3],
+    device: &Device,
+) -> Result<ViewRender> {
+    let n = rays.len();
+    let mut out = ViewRender {
+        width,
+        height,
+        rgb: Vec::with_capacity(n * 3),
+        depth: Vec::with_capacity(n),
+        opacity: Vec::with_capacity(n),
+    };
+    let mut start = 0;
+    while start < n {
+        let end = (start + CHUNK).min(n);
+        let r = render(model, &rays.slice(start, end), sampling, code.clone(), background, None, device);
+        out.rgb.extend(to_vec(r.fine.rgb)?);
+        out.depth.extend(to_vec(r.fine.depth)?);
+        out.opacity.extend(to_vec(r.fine.opacity)?);
+        start = end;
+    }
+    Ok(out)
+}
+
+/// Renders the view of `camera` in `scene`'s frame.
+pub fn render_camera(
+    model: &NerfModel,
+    scene: &Scene,
+    camera: &Camera,
+    sampling: Sampling,
+    code: Option<Tensor<2>>,
+    background: [f32; 3],
+    device: &Device,
+) -> Result<ViewRender> {
+    let rays = RenderRays::for_scene(scene, camera_rays(camera, |o, d| scene.ray_range(o, d)));
+    render_rays(
+        model,
+        &rays,
+        camera.width as usize,
+        camera.height as usize,
+        sampling,
+        code,
+        background,
+        device,
+    )
+}
+
+/// One held-out view, rendered and scored.
+#[derive(Debug, Clone)]
+pub struct ViewEval {
+    /// View index in the scene.
+    pub view: usize,
+    /// The render.
+    pub render: ViewRender,
+    /// The photo, `h·w·3`.
+    pub photo: Vec<f32>,
+    /// PSNR in dB.
+    pub psnr: f64,
+    /// SSIM.
+    pub ssim: f64,
+}
+
+impl ViewEval {
+    /// photo | render | depth.
+    pub fn picture(&self, _scene: &Scene) -> RgbImage {
+        let r = &self.render;
+        RgbImage::hstack(&[
+            RgbImage {
+                width: r.width,
+                height: r.height,
+                data: self.photo.clone(),
+            },
+            r.image(),
+            r.depth_picture(),
+        ])
+    }
+}
+
+/// Renders and scores `views` of `scene`.
+pub fn evaluate_views(
+    model: &NerfModel,
+    scene: &Scene,
+    views: &[usize],
+    sampling: Sampling,
+    code: Option<Tensor<2>>,
+    background: [f32; 3],
+    device: &Device,
+) -> Result<Vec<ViewEval>> {
+    let mut out = Vec::with_capacity(views.len());
+    for &view in views {
+        let v = scene.views.get(view).ok_or_else(|| anyhow::anyhow!("view {view} does not exist"))?;
+        let render = render_camera(model, scene, &v.camera, sampling, code.clone(), background, device)?;
+        let photo = v.image.to_f32();
+        let mse = render
+            .rgb
+            .iter()
+            .zip(&photo)
+            .map(|(a, b)| ((a.clamp(0.0, 1.0) - b) as f64).powi(2))
+            .sum::<f64>()
+            / photo.len() as f64;
+        let s = ssim(&render.rgb, &photo, render.width, render.height);
+        out.push(ViewEval {
+            view,
+            render,
+            photo,
+            psnr: psnr(mse),
+            ssim: s,
+        });
+    }
+    Ok(out)
+}
+
+/// Stacks evaluation pictures into one PNG.
+pub fn save_eval_picture(pictures: &[RgbImage], path: &Path) -> Result<()> {
+    RgbImage::vstack(pictures).save(path)
+}

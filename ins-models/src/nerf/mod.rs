@@ -1,0 +1,22 @@
+//! NeRF + INS: stylized novel-view synthesis. A radiance field is pretrained on posed photos
+//! (photometric MSE), then stylized through SIM + AM with VGG style and content losses on
+//! strided patches, while a frozen copy of the pretrained geometry keeps the density in place
+//! (the self-distilled geometry loss).
+//!
+//! - [`model`]: the field (hash grid or NeRF MLP), coarse field, SIM and AM composed.
+//! - [`render`]: sampling along rays, evaluating the field under every style, compositing.
+//! - [`task`]: the losses of each phase, occupancy refresh, held-out evaluation.
+//! - [`run`]: pretraining, stylizing and loading run folders.
+//! - [`eval`]: whole-view renders and their PSNR / SSIM.
+
+pub mod config;
+pub mod eval;
+pub mod model;
+pub mod render;
+pub mod run;
+pub mod state_io;
+pub mod task;
+
+pub use config::NerfRunConfig;
+pub use model::NerfModel;
+pub use run::{NerfRun, pretrain, stylize};

@@ -1,0 +1,227 @@
+//! NeRF + INS: a radiance field (the CIM: hash grid or NeRF MLP, with its colour head), an
+//! optional coarse field for NeRF's hierarchical sampling, and, once stylization starts, a SIM
+//! (style code + encoded position → style features) and an AM that fuses them into the
+//! density and the features before the colour head.
+
+use burn::prelude::*;
+use ins_core::modules::color_head::{ColorHeadConfig, DirEncoding};
+use ins_core::modules::encoding::FourierEncoding;
+use ins_core::modules::field::{CimKind, Field, Geometry};
+use ins_core::modules::grid_field::GridGeometryConfig;
+use ins_core::modules::hash_grid::HashGridConfig;
+use ins_core::modules::mlp_field::MlpGeometryConfig;
+use ins_core::modules::radiance_am::{RadianceAm, RadianceAmConfig};
+use ins_core::modules::sim::{Sim, SimConfig};
+use ins_core::train::{GroupSpec, Optimizable};
+
+/// SIM and AM: what stylization adds to a pretrained field.
+#[derive(Module, Debug)]
+pub struct Stylizer {
+    /// Style code (+ encoded position at layer 2) → style features.
+    pub sim: Sim,
+    /// Fuses style features into density and features.
+    pub am: RadianceAm,
+    /// Octaves of the position encoding the SIM sees.
+    pub position_freqs: usize,
+}
+
+/// The model of a NeRF run.
+#[derive(Module, Debug)]
+pub struct NerfModel {
+    /// The content module and its colour head (the fine network of the MLP variant).
+    pub field: Field,
+    /// NeRF's coarse network (MLP variant only).
+    pub coarse: Option<Field>,
+    /// SIM + AM (stylization runs only).
+    pub stylizer: Option<Stylizer>,
+    /// The scene box `[min xyz, max xyz]` the field covers.
+    #[module(skip)]
+    pub aabb: [f32; 6],
+}
+
+/// Sizes of a NeRF model.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NerfArch {
+    /// Content module.
+    pub cim: CimKind,
+    /// Hash grid (grid variant).
+    pub log2_table: u32,
+    /// Finest grid resolution (grid variant).
+    pub max_resolution: u32,
+}
+
+fn field(arch: &NerfArch, aabb: [f32; 6], device: &Device) -> Field {
+    match arch.cim {
+        CimKind::Grid => {
+            let g = GridGeometryConfig::new(
+                HashGridConfig::new()
+                    .with_log2_table(arch.log2_table)
+                    .with_max_resolution(arch.max_resolution),
+            )
+            .init(aabb, device);
+            let color = ColorHeadConfig::new(g.d_features(), DirEncoding::SphericalHarmonics)
+                .with_d_hidden(64)
+                .with_depth(2)
+                .init(device);
+            Field {
+                geometry: Geometry::Grid(g),
+                color,
+            }
+        }
+        CimKind::Mlp => {
+            let m = MlpGeometryConfig::new().init(device);
+            let color = ColorHeadConfig::new(m.d_features(), DirEncoding::Fourier(4))
+                .with_d_hidden(128)
+                .with_depth(1)
+                .init(device);
+            Field {
+                geometry: Geometry::Mlp(m),
+                color,
+            }
+        }
+    }
+}
+
+const GRID: &[GroupSpec] = &[
+    GroupSpec::new("geometry", &["field.geometry"]),
+    GroupSpec::new("color", &["field.color"]),
+];
+const MLP: &[GroupSpec] = &[
+    GroupSpec::new("geometry", &["field.geometry"]),
+    GroupSpec::new("color", &["field.color"]),
+    GroupSpec::new("coarse", &["coarse"]),
+];
+const GRID_STYLIZED: &[GroupSpec] = &[
+    GroupSpec::new("geometry", &["field.geometry"]),
+    GroupSpec::new("color", &["field.color"]),
+    GroupSpec::new("sim", &["stylizer.sim"]),
+    GroupSpec::new("am_density", &["stylizer.am.density"]),
+    GroupSpec::new("am_color", &["stylizer.am.feature"]),
+];
+const MLP_STYLIZED: &[GroupSpec] = &[
+    GroupSpec::new("geometry", &["field.geometry"]),
+    GroupSpec::new("color", &["field.color"]),
+    GroupSpec::new("coarse", &["coarse"]),
+    GroupSpec::new("sim", &["stylizer.sim"]),
+    GroupSpec::new("am_density", &["stylizer.am.density"]),
+    GroupSpec::new("am_color", &["stylizer.am.feature"]),
+];
+
+impl Optimizable for NerfModel {
+    fn groups(&self) -> &'static [GroupSpec] {
+        match (self.coarse.is_some(), self.stylizer.is_some()) {
+            (false, false) => GRID,
+            (true, false) => MLP,
+            (false, true) => GRID_STYLIZED,
+            (true, true) => MLP_STYLIZED,
+        }
+    }
+}
+
+/// What the fine field gives at a set of points, for every style.
+pub struct Evaluated {
+    /// Activated density `[S, N]` (S = 1 without styles).
+    pub density: Tensor<2>,
+    /// Colour `[S, N, 3]`.
+    pub rgb: Tensor<3>,
+    /// Raw density after the AM `[S, N]` (the geometry loss compares it with a teacher's).
+    pub raw: Tensor<2>,
+}
+
+impl NerfModel {
+    /// A fresh model (no stylizer) for `arch` over the box `aabb`.
+    pub fn new(arch: &NerfArch, aabb: [f32; 6], device: &Device) -> Self {
+        Self {
+            field: field(arch, aabb, device),
+            coarse: (arch.cim == CimKind::Mlp).then(|| field(arch, aabb, device)),
+            stylizer: None,
+            aabb,
+        }
+    }
+
+    /// Adds a fresh SIM and AM (AM = identity) for `n_styles` styles. The MLP variant follows
+    /// the authors' sizes (AM feature branch of 4 layers); the grid variant a 2-layer one.
+    pub fn with_stylizer(mut self, n_styles: usize, sim_width: usize, position_freqs: usize, device: &Device) -> Self {
+        let d_pos = FourierEncoding::new(position_freqs).d_out(3);
+        let sim = SimConfig::new(n_styles)
+            .with_d_hidden(sim_width)
+            .with_depth(4)
+            .with_code_every_layer(true)
+            .with_d_position(d_pos)
+            .init(device);
+        let feature_depth = if self.coarse.is_some() { 4 } else { 2 };
+        let am = RadianceAmConfig::new(self.field.geometry.d_features(), sim_width)
+            .with_d_hidden(sim_width)
+            .with_feature_depth(feature_depth)
+            .init(device);
+        self.stylizer = Some(Stylizer {
+            sim,
+            am,
+            position_freqs,
+        });
+        self
+    }
+
+    /// Number of styles (0 without a stylizer).
+    pub fn n_styles(&self) -> usize {
+        self.stylizer
+            .as_ref()
+            .map_or(0, |s| s.sim.layers[0].weight.dims()[0])
+    }
+
+    /// Positions `[N, 3]` → `[-1, 1]³` over the scene box (the SIM's position input).
+    fn unit_positions(&self, x: Tensor<2>) -> Tensor<2> {
+        let a = self.aabb;
+        let device = x.device();
+        let c = Tensor::<1>::from_floats(
+            [(a[0] + a[3]) / 2.0, (a[1] + a[4]) / 2.0, (a[2] + a[5]) / 2.0],
+            &device,
+        )
+        .reshape([1, 3]);
+        let s = Tensor::<1>::from_floats(
+            [2.0 / (a[3] - a[0]), 2.0 / (a[4] - a[1]), 2.0 / (a[5] - a[2])],
+            &device,
+        )
+        .reshape([1, 3]);
+        (x - c) * s
+    }
+
+    /// Evaluates the fine field at `x [N, 3]` seen along directions encoded by the colour head
+    /// (`ColorHead::encode_dirs`, `[N, d]`), under every style
+    /// code of `codes [S, n_styles]` (or unstylized when `None` or without a stylizer). The
+    /// content module runs once; only SIM, AM and colour run per style.
+    pub fn evaluate(&self, x: Tensor<2>, dirs: Tensor<2>, codes: Option<Tensor<2>>) -> Evaluated {
+        let [n, _] = x.dims();
+        let (raw, features) = self.field.geometry.forward(x.clone());
+        let (Some(st), Some(codes)) = (&self.stylizer, codes) else {
+            let density = self.field.geometry.activate(raw.clone());
+            let rgb = self.field.color.forward(features, dirs);
+            return Evaluated {
+                density: density.reshape([1, n]),
+                rgb: rgb.reshape([1, n, 3]),
+                raw: raw.reshape([1, n]),
+            };
+        };
+        let [s, k] = codes.dims();
+        let repeat2 = |t: Tensor<2>| -> Tensor<2> {
+            let w = t.dims()[1];
+            if s == 1 {
+                t
+            } else {
+                t.unsqueeze_dim::<3>(0).expand([s, n, w]).reshape([s * n, w])
+            }
+        };
+        let pos = FourierEncoding::new(st.position_freqs).encode(self.unit_positions(x));
+        let code_rows = codes.reshape([s, 1, k]).expand([s, n, k]).reshape([s * n, k]);
+        let style = st.sim.forward(code_rows, Some(repeat2(pos)));
+        let raw_rep: Tensor<1> = repeat2(raw.reshape([n, 1])).reshape([s * n]);
+        let (raw_s, feat_s) = st.am.forward(raw_rep, repeat2(features), style);
+        let density = self.field.geometry.activate(raw_s.clone());
+        let rgb = self.field.color.forward(feat_s, repeat2(dirs));
+        Evaluated {
+            density: density.reshape([s, n]),
+            rgb: rgb.reshape([s, n, 3]),
+            raw: raw_s.reshape([s, n]),
+        }
+    }
+}

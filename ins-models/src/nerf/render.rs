@@ -1,0 +1,270 @@
+//! Rendering rays of a NeRF model: sample along the rays (occupancy-grid marching for the grid
+//! variant, coarse-to-fine for the MLP), evaluate the field (under every style), composite.
+
+use burn::prelude::*;
+use ins_core::data::{Scene, SceneFormat};
+use ins_core::render::occupancy::OccupancyGrid;
+use ins_core::render::rays::{RayBatch, Rays, flatten};
+use ins_core::render::samplers::{deltas, hierarchical, stratified};
+use ins_core::render::volume::{Composite, composite};
+use ins_core::render::geometry::Vec3;
+
+use super::model::NerfModel;
+
+/// Rays ready for rendering: the rays samples are placed along (NDC for forward-facing scenes)
+/// and the unit world directions the colour head sees.
+#[derive(Debug, Clone, Default)]
+pub struct RenderRays {
+    /// Sample positions are `origin + t · direction` of these, `t ∈ [near, far]`.
+    pub rays: Rays,
+    /// Unit viewing directions in the scene frame.
+    pub view_dirs: Vec<Vec3>,
+}
+
+impl RenderRays {
+    /// The rays of `rays` as scene `scene` renders them: LLFF scenes in NDC (NeRF's
+    /// forward-facing parametrisation, near plane 1), the others as they are.
+    pub fn for_scene(scene: &Scene, rays: Rays) -> Self {
+        let view_dirs = rays.directions.iter().map(|d| d.normalize_or_zero()).collect();
+        let rays = match scene.format {
+            SceneFormat::Llff => match scene.views.first() {
+                Some(v) => rays.to_ndc(v.camera.width, v.camera.height, v.camera.fx, 1.0),
+                None => rays,
+            },
+            _ => rays,
+        };
+        Self { rays, view_dirs }
+    }
+
+    /// From a training batch.
+    pub fn from_batch(scene: &Scene, batch: &RayBatch) -> Self {
+        Self::for_scene(scene, batch.rays.clone())
+    }
+
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.rays.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.rays.is_empty()
+    }
+
+    /// Rays `start..end`.
+    pub fn slice(&self, start: usize, end: usize) -> Self {
+        Self {
+            rays: Rays {
+                origins: self.rays.origins[start..end].to_vec(),
+                directions: self.rays.directions[start..end].to_vec(),
+                near: self.rays.near[start..end].to_vec(),
+                far: self.rays.far[start..end].to_vec(),
+            },
+            view_dirs: self.view_dirs[start..end].to_vec(),
+        }
+    }
+}
+
+/// The box a scene's field covers, `[min xyz, max xyz]`: the scene's bounding volume, or the
+/// NDC box for forward-facing scenes.
+pub fn scene_aabb(scene: &Scene) -> [f32; 6] {
+    match scene.format {
+        SceneFormat::Llff => [-1.5, -1.5, -1.0, 1.5, 1.5, 1.0],
+        _ => {
+            let (min, max) = scene.bounds.aabb();
+            [min.x, min.y, min.z, max.x, max.y, max.z]
+        }
+    }
+}
+
+/// How samples are placed along rays.
+#[derive(Debug, Clone, Copy)]
+pub enum Sampling<'a> {
+    /// March through occupied cells of a grid, at most `max_per_ray` samples per ray.
+    Occupancy {
+        /// The grid.
+        grid: &'a OccupancyGrid,
+        /// Cap per ray.
+        max_per_ray: usize,
+    },
+    /// NeRF: `coarse` stratified samples through the coarse field, then `fine` more from its
+    /// weights, all through the fine field.
+    CoarseFine {
+        /// Stratified samples.
+        coarse: usize,
+        /// Importance samples.
+        fine: usize,
+    },
+}
+
+/// A render of `R` rays under `S` styles.
+pub struct Rendered {
+    /// Composited fine render over `S·R` rays (style-major).
+    pub fine: Composite,
+    /// The coarse render (MLP variant), `[R, 3]`.
+    pub coarse_rgb: Option<Tensor<2>>,
+    /// The fine sample points, `[N, 3]`.
+    pub points: Tensor<2>,
+    /// Raw density after the AM at those points, `[S, N]`.
+    pub raw: Tensor<2>,
+    /// Fine samples evaluated (per style).
+    pub samples: usize,
+}
+
+fn tensor2(v: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
+    Tensor::<1>::from_floats(v.as_slice(), device).reshape([rows, cols])
+}
+
+fn repeat_rows(t: Tensor<2>, s: usize) -> Tensor<2> {
+    if s == 1 {
+        return t;
+    }
+    let [r, c] = t.dims();
+    t.unsqueeze_dim::<3>(0).expand([s, r, c]).reshape([s * r, c])
+}
+
+/// Renders `rays` with `model`, under the style codes `codes [S, n_styles]` if given. `seed`
+/// jitters the samples (training); `None` places them deterministically (evaluation).
+pub fn render(
+    model: &NerfModel,
+    rays: &RenderRays,
+    sampling: Sampling,
+    codes: Option<Tensor<2>>,
+    background: [f32; 3],
+    seed: Option<u64>,
+    device: &Device,
+) -> Rendered {
+    match sampling {
+        Sampling::Occupancy { grid, max_per_ray } => {
+            render_marched(model, rays, grid, max_per_ray, codes, background, seed, device)
+        }
+        Sampling::CoarseFine { coarse, fine } => {
+            render_coarse_fine(model, rays, coarse, fine, codes, background, seed, device)
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_marched(
+    model: &NerfModel,
+    rays: &RenderRays,
+    grid: &OccupancyGrid,
+    max_per_ray: usize,
+    codes: Option<Tensor<2>>,
+    background: [f32; 3],
+    seed: Option<u64>,
+    device: &Device,
+) -> Rendered {
+    let r = rays.len();
+    let mut m = grid.march(&rays.rays, max_per_ray, seed);
+    if m.is_empty() {
+        // Keep the graph connected when no ray meets an occupied cell: one inert sample.
+        m.ray.push(0);
+        m.t.push(rays.rays.near[0]);
+        m.delta.push(0.0);
+        m.offsets.iter_mut().skip(1).for_each(|o| *o = 1);
+    }
+    let n = m.len();
+    let width = m.max_per_ray().max(1);
+    let mut x = Vec::with_capacity(n * 3);
+    let mut dirs = Vec::with_capacity(n * 3);
+    for (&ray, &t) in m.ray.iter().zip(&m.t) {
+        x.extend(rays.rays.point(ray as usize, t).to_array());
+        dirs.extend(rays.view_dirs[ray as usize].to_array());
+    }
+    // Padded [R, width] layout: index into the packed samples, N for padding.
+    let mut index = vec![n as i64; r * width];
+    let mut t_pad = vec![0f32; r * width];
+    let mut delta_pad = vec![0f32; r * width];
+    for ray in 0..r {
+        let (a, b) = (m.offsets[ray] as usize, m.offsets[ray + 1] as usize);
+        for (j, k) in (a..b).enumerate() {
+            index[ray * width + j] = k as i64;
+            t_pad[ray * width + j] = m.t[k];
+            delta_pad[ray * width + j] = m.delta[k];
+        }
+        // Padding keeps the last distance so the depth of empty columns stays meaningful.
+        let last = if b > a { m.t[b - 1] } else { rays.rays.near[ray] };
+        for j in (b - a)..width {
+            t_pad[ray * width + j] = last;
+        }
+    }
+    let points = tensor2(x, n, 3, device);
+    let ev = model.evaluate(points.clone(), model.field.color.encode_dirs(&dirs, device), codes);
+    let s = ev.density.dims()[0];
+    let index = Tensor::<1, Int>::from_data(TensorData::new(index, [r * width]), device);
+    let density = Tensor::cat(vec![ev.density, Tensor::zeros([s, 1], device)], 1)
+        .select(1, index.clone())
+        .reshape([s * r, width]);
+    let rgb = Tensor::cat(vec![ev.rgb, Tensor::zeros([s, 1, 3], device)], 1)
+        .select(1, index)
+        .reshape([s * r, width, 3]);
+    let t = repeat_rows(tensor2(t_pad, r, width, device), s);
+    let delta = repeat_rows(tensor2(delta_pad, r, width, device), s);
+    Rendered {
+        fine: composite(density, rgb, t, delta, background),
+        coarse_rgb: None,
+        points,
+        raw: ev.raw,
+        samples: n,
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_coarse_fine(
+    model: &NerfModel,
+    rays: &RenderRays,
+    n_coarse: usize,
+    n_fine: usize,
+    codes: Option<Tensor<2>>,
+    background: [f32; 3],
+    seed: Option<u64>,
+    device: &Device,
+) -> Rendered {
+    let r = rays.len();
+    let o = tensor2(flatten(&rays.rays.origins), r, 3, device);
+    let d = tensor2(flatten(&rays.rays.directions), r, 3, device);
+    let view_flat = flatten(&rays.view_dirs);
+    let near = Tensor::<1>::from_floats(rays.rays.near.as_slice(), device);
+    let far = Tensor::<1>::from_floats(rays.rays.far.as_slice(), device);
+    let points = |t: &Tensor<2>| -> Tensor<2> {
+        let s = t.dims()[1];
+        (o.clone().unsqueeze_dim::<3>(1) + d.clone().unsqueeze_dim::<3>(1) * t.clone().unsqueeze_dim::<3>(2))
+            .reshape([r * s, 3])
+    };
+    // Encoded directions, repeated for each of a ray's `s` samples.
+    let view = |head: &ins_core::modules::color_head::ColorHead, s: usize| -> Tensor<2> {
+        let enc = head.encode_dirs(&view_flat, device);
+        let d = enc.dims()[1];
+        enc.unsqueeze_dim::<3>(1).expand([r, s, d]).reshape([r * s, d])
+    };
+    let t_c = stratified(near, far.clone(), n_coarse, seed);
+    let coarse = model.coarse.as_ref().unwrap_or(&model.field);
+    let (dens_c, rgb_c) = coarse.forward(points(&t_c), view(&coarse.color, n_coarse));
+    let c = composite(
+        dens_c.reshape([r, n_coarse]),
+        rgb_c.reshape([r, n_coarse, 3]),
+        t_c.clone(),
+        deltas(t_c.clone(), far.clone()),
+        background,
+    );
+    let t_f = hierarchical(t_c, c.weights.clone(), n_fine, seed.map(|s| s ^ 0x5bd1_e995));
+    let total = n_coarse + n_fine;
+    let x = points(&t_f);
+    let ev = model.evaluate(x.clone(), view(&model.field.color, total), codes);
+    let s = ev.density.dims()[0];
+    let delta = deltas(t_f.clone(), far);
+    Rendered {
+        fine: composite(
+            ev.density.reshape([s * r, total]),
+            ev.rgb.reshape([s * r, total, 3]),
+            repeat_rows(t_f, s),
+            repeat_rows(delta, s),
+            background,
+        ),
+        coarse_rgb: Some(c.rgb),
+        points: x,
+        raw: ev.raw,
+        samples: r * total,
+    }
+}

@@ -1,0 +1,115 @@
+//! The NeRF task's state in a checkpoint (`task.bin`): the running samples-per-ray and the
+//! occupancy grid, in a small binary layout checked on reading (a damaged file is an error,
+//! never a huge allocation).
+
+use anyhow::{Result, bail, ensure};
+use ins_core::render::occupancy::OccupancyGrid;
+
+const MAGIC: &[u8; 8] = b"INSNERF1";
+/// Largest grid accepted: 512³ cells.
+const MAX_RESOLUTION: u32 = 512;
+
+/// Encodes the task state.
+pub fn encode(samples_per_ray: f32, grid: Option<&OccupancyGrid>) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&samples_per_ray.to_le_bytes());
+    match grid {
+        None => out.push(0),
+        Some(g) => {
+            out.push(1);
+            out.extend_from_slice(&g.resolution.to_le_bytes());
+            for v in g.min.iter().chain(&g.max).chain([&g.step, &g.threshold, &g.decay]) {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+            for d in &g.density {
+                out.extend_from_slice(&d.to_le_bytes());
+            }
+            out.extend(g.occupied.iter().map(|&o| o as u8));
+        }
+    }
+    out
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn take(&mut self, n: usize) -> Result<&[u8]> {
+        ensure!(self.bytes.len() - self.at >= n, "truncated task state");
+        let s = &self.bytes[self.at..self.at + n];
+        self.at += n;
+        Ok(s)
+    }
+    fn f32(&mut self) -> Result<f32> {
+        Ok(f32::from_le_bytes(self.take(4)?.try_into()?))
+    }
+    fn u32(&mut self) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.take(4)?.try_into()?))
+    }
+}
+
+/// Decodes what [`encode`] wrote.
+pub fn decode(bytes: &[u8]) -> Result<(f32, Option<OccupancyGrid>)> {
+    let mut r = Reader { bytes, at: 0 };
+    ensure!(r.take(8)? == MAGIC, "not a NeRF task state");
+    let spr = r.f32()?;
+    let grid = match r.take(1)?[0] {
+        0 => None,
+        1 => {
+            let resolution = r.u32()?;
+            ensure!(
+                (1..=MAX_RESOLUTION).contains(&resolution),
+                "occupancy grid resolution {resolution} is out of range"
+            );
+            let mut v = [0f32; 9];
+            for x in &mut v {
+                *x = r.f32()?;
+            }
+            let n = (resolution as usize).pow(3);
+            let density = r
+                .take(n * 4)?
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            let occupied = r.take(n)?.iter().map(|&b| b != 0).collect();
+            ensure!(r.at == bytes.len(), "trailing bytes after the task state");
+            Some(OccupancyGrid {
+                resolution,
+                min: [v[0], v[1], v[2]],
+                max: [v[3], v[4], v[5]],
+                density,
+                occupied,
+                step: v[6],
+                threshold: v[7],
+                decay: v[8],
+            })
+        }
+        other => bail!("bad grid marker {other} in the task state"),
+    };
+    Ok((spr, grid))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ins_core::render::geometry::Vec3;
+
+    #[test]
+    fn round_trip_and_damage_is_an_error() {
+        let mut g = OccupancyGrid::new(4, Vec3::splat(-1.0), Vec3::ONE, 0.1);
+        g.density[3] = 2.5;
+        g.occupied[5] = false;
+        let b = encode(12.5, Some(&g));
+        let (s, back) = decode(&b).unwrap();
+        assert_eq!(s, 12.5);
+        assert_eq!(back.unwrap(), g);
+        assert!(decode(&b[..b.len() - 1]).is_err());
+        let mut huge = b.clone();
+        huge[13..17].copy_from_slice(&100_000u32.to_le_bytes());
+        assert!(decode(&huge).is_err());
+        assert_eq!(decode(&encode(3.0, None)).unwrap().1, None);
+    }
+}

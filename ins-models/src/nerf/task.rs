@@ -1,0 +1,340 @@
+//! The NeRF task the trainer runs: photometric pretraining on random rays, or stylization on
+//! strided patches with VGG losses and the frozen-teacher geometry loss; the occupancy grid is
+//! refreshed from the model, and held-out views are evaluated as training goes.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use burn::prelude::*;
+use ins_core::data::{Scene, Split};
+use ins_core::imaging::RgbImage;
+use ins_core::loss::{content_loss, mse, psnr, style_loss};
+use ins_core::modules::field::Geometry;
+use ins_core::render::occupancy::OccupancyGrid;
+use ins_core::render::patches::{PatchSampler, PatchSpec};
+use ins_core::render::rays::RaySampler;
+use ins_core::train::{LossTerms, StepContext, Task};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use vgg_import::Vgg;
+
+use super::eval::{evaluate_views, save_eval_picture};
+use super::model::NerfModel;
+use super::render::{RenderRays, Rendered, Sampling, render};
+
+/// What a phase of a NeRF run computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NerfObjective {
+    /// Photometric MSE on random rays of the training views.
+    Pretrain,
+    /// Style, content and geometry losses on strided patches.
+    Stylize,
+}
+
+/// How rays are sampled along, per variant.
+#[derive(Debug, Clone, Copy)]
+pub enum Sampler {
+    /// Occupancy-grid marching with an adaptive ray count: about `target_samples` per step.
+    Marching {
+        /// Fine samples per step aimed at.
+        target_samples: usize,
+        /// Cap per ray.
+        max_per_ray: usize,
+        /// Steps between grid refreshes (0: the grid is fixed).
+        refresh_every: usize,
+    },
+    /// NeRF's coarse-to-fine sampling with a fixed ray count.
+    CoarseFine {
+        /// Rays per step.
+        rays: usize,
+        /// Stratified samples.
+        coarse: usize,
+        /// Importance samples.
+        fine: usize,
+    },
+}
+
+/// What stylization needs.
+pub struct Stylization {
+    /// Frozen VGG-16.
+    pub vgg: Vgg,
+    /// Gram targets per style layer, `[S, C, C]`.
+    pub targets: [Tensor<3>; 4],
+    /// One-hot codes, `[S, S]`.
+    pub codes: Tensor<2>,
+    /// The pretrained geometry, frozen: the teacher of the geometry loss.
+    pub teacher: Geometry,
+    /// Patch geometry.
+    pub patch: PatchSpec,
+}
+
+/// Held-out evaluation during training.
+pub struct EvalSchedule {
+    /// Steps between evaluations (0: never during training).
+    pub every: usize,
+    /// Views rendered each time.
+    pub views: Vec<usize>,
+    /// Where pictures go.
+    pub dir: PathBuf,
+}
+
+/// The task.
+pub struct NerfTask {
+    /// The scene.
+    pub scene: Scene,
+    /// How rays are sampled along.
+    pub sampler: Sampler,
+    /// The occupancy grid (grid variant).
+    pub grid: Option<OccupancyGrid>,
+    /// Running mean of fine samples per ray (sets the ray count).
+    pub samples_per_ray: f32,
+    /// Set for stylization runs.
+    pub style: Option<Stylization>,
+    /// Evaluation schedule.
+    pub eval: EvalSchedule,
+    /// Background colour.
+    pub background: [f32; 3],
+    device: Device,
+    last_samples: usize,
+    last_rays: usize,
+}
+
+/// Grid refreshes evaluate every cell during the first steps (while the field takes shape),
+/// then a quarter of the cells (half uniformly, half among occupied ones), as instant-ngp does.
+const WARMUP_STEPS: usize = 256;
+const REFRESH_SHARE: usize = 4;
+
+impl NerfTask {
+    /// A task on `scene` computing on `device` (an autodiff device).
+    pub fn new(
+        scene: Scene,
+        sampler: Sampler,
+        grid: Option<OccupancyGrid>,
+        style: Option<Stylization>,
+        eval: EvalSchedule,
+        device: &Device,
+    ) -> Self {
+        let background = if scene.white_background {
+            [1.0; 3]
+        } else {
+            [0.0; 3]
+        };
+        Self {
+            scene,
+            sampler,
+            grid,
+            samples_per_ray: 64.0,
+            style,
+            eval,
+            background,
+            device: device.clone(),
+            last_samples: 0,
+            last_rays: 0,
+        }
+    }
+
+    /// The sampling for this step's render.
+    fn sampling(&self) -> Sampling<'_> {
+        match (self.sampler, &self.grid) {
+            (Sampler::Marching { max_per_ray, .. }, Some(grid)) => Sampling::Occupancy { grid, max_per_ray },
+            (Sampler::CoarseFine { coarse, fine, .. }, _) => Sampling::CoarseFine { coarse, fine },
+            (Sampler::Marching { .. }, None) => Sampling::CoarseFine { coarse: 64, fine: 64 },
+        }
+    }
+
+    /// Rays this step: fixed for coarse-to-fine, adapted to the sample budget when marching.
+    fn ray_count(&self) -> usize {
+        match self.sampler {
+            Sampler::Marching { target_samples, .. } => {
+                ((target_samples as f32 / self.samples_per_ray.max(1.0)) as usize).clamp(256, 1 << 16)
+            }
+            Sampler::CoarseFine { rays, .. } => rays,
+        }
+    }
+
+    fn pretrain_losses(&mut self, model: &NerfModel, seed: u64) -> Result<LossTerms> {
+        let batch = RaySampler::new(self.ray_count(), seed).sample(&self.scene, Split::Train)?;
+        let rays = RenderRays::from_batch(&self.scene, &batch);
+        let r = batch.len();
+        let target = Tensor::<1>::from_floats(batch.rgb.as_flattened(), &self.device).reshape([r, 3]);
+        // Photos composited on white with an alpha mask (NeRF-synthetic) train against random
+        // backgrounds, recomposited from the alpha: a field cannot then explain the white
+        // background with colour instead of transparency (instant-ngp's trick).
+        let random_background = self.scene.white_background
+            && matches!(self.sampler, Sampler::Marching { .. })
+            && self.scene.has_masks();
+        let (pred, target, out) = if random_background {
+            let mut rng = SmallRng::seed_from_u64(seed ^ 0xba5e_ba11);
+            let bg: Vec<f32> = (0..r * 3).map(|_| rng.random::<f32>()).collect();
+            let bg = Tensor::<1>::from_floats(bg.as_slice(), &self.device).reshape([r, 3]);
+            let alpha = Tensor::<1>::from_floats(batch.mask.as_slice(), &self.device).reshape([r, 1]);
+            let transparent = alpha.neg().add_scalar(1.0);
+            let target = target + transparent * (bg.clone().sub_scalar(1.0));
+            let out = render(model, &rays, self.sampling(), None, [0.0; 3], Some(seed), &self.device);
+            let rest = out.fine.opacity.clone().neg().add_scalar(1.0).reshape([r, 1]);
+            (out.fine.rgb.clone() + rest * bg, target, out)
+        } else {
+            let out = render(model, &rays, self.sampling(), None, self.background, Some(seed), &self.device);
+            (out.fine.rgb.clone(), target, out)
+        };
+        self.last_samples = out.samples;
+        self.last_rays = r;
+        let mut terms = LossTerms::default()
+            .term("mse", mse(pred, target.clone()))
+            .metric_of("psnr", "mse", psnr)
+            .metric("samples_per_ray", out.samples as f64 / batch.len() as f64)
+            .metric("rays", batch.len() as f64);
+        if let Some(c) = out.coarse_rgb {
+            terms = terms.term("mse_coarse", mse(c, target));
+        }
+        Ok(terms)
+    }
+
+    fn stylize_losses(&mut self, model: &NerfModel, seed: u64) -> Result<LossTerms> {
+        let style = self.style.as_ref().context("a stylization phase without styles")?;
+        let spec = style.patch;
+        let mut sampler = PatchSampler::new(spec.size, spec.stride, seed);
+        let patch = sampler.sample(&self.scene, Split::Train)?;
+        let k = spec.size as usize;
+        let rays = RenderRays::from_batch(&self.scene, &patch.batch);
+        let out: Rendered = render(
+            model,
+            &rays,
+            self.sampling(),
+            Some(style.codes.clone()),
+            self.background,
+            Some(seed),
+            &self.device,
+        );
+        self.last_samples = out.samples;
+        self.last_rays = k * k;
+        let n_styles = style.codes.dims()[0];
+        let images = out.fine.rgb.reshape([n_styles, k, k, 3]).permute([0, 3, 1, 2]);
+        let photo = Tensor::<1>::from_floats(patch.batch.rgb.as_flattened(), &self.device)
+            .reshape([1, k, k, 3])
+            .permute([0, 3, 1, 2]);
+        let content_target = style.vgg.features(photo).relu2_2.detach();
+        let feats = style.vgg.features(images);
+        let teacher_raw = {
+            let (raw, _) = style.teacher.forward(out.points.detach());
+            raw.detach()
+        };
+        let [s, n] = out.raw.dims();
+        let geometry = (out.raw - teacher_raw.reshape([1, n]).expand([s, n])).abs().mean();
+        Ok(LossTerms::default()
+            .term("style", style_loss(&feats, &style.targets))
+            .term("content", content_loss(&feats, &content_target))
+            .term("geometry", geometry)
+            .metric("samples_per_ray", self.last_samples as f64 / self.last_rays.max(1) as f64))
+    }
+
+    /// Refreshes the occupancy grid from the model's current density.
+    pub fn refresh_grid(&mut self, model: &NerfModel, step: usize, seed: u64) {
+        let Some(grid) = self.grid.as_mut() else { return };
+        let cells = if step < WARMUP_STEPS {
+            usize::MAX
+        } else {
+            grid.density.len() / REFRESH_SHARE
+        };
+        let field = model.field.valid();
+        let device = self.device.clone().inner();
+        grid.update(cells, seed, |points| {
+            let n = points.len() / 3;
+            let mut out = Vec::with_capacity(n);
+            for chunk in points.chunks(3 * 65536) {
+                let m = chunk.len() / 3;
+                let x = Tensor::<1>::from_floats(chunk, &device).reshape([m, 3]);
+                out.extend(
+                    field
+                        .density(x)
+                        .into_data()
+                        .convert::<f32>()
+                        .try_into_vec::<f32>()
+                        .unwrap_or_else(|_| vec![0.0; m]),
+                );
+            }
+            out
+        });
+    }
+
+    fn evaluate(&self, model: &NerfModel, step: usize) -> Result<Vec<(String, f64)>> {
+        let codes = self.style.as_ref().map(|s| s.codes.clone());
+        let n_styles = codes.as_ref().map_or(0, |c| c.dims()[0]);
+        let model = model.valid();
+        let device = self.device.clone().inner();
+        let first_code = codes.map(|c| c.slice([0..1]).inner().to_device(&device));
+        let views = evaluate_views(
+            &model,
+            &self.scene,
+            &self.eval.views,
+            self.sampling(),
+            first_code,
+            self.background,
+            &device,
+        )?;
+        let pictures: Vec<RgbImage> = views.iter().map(|v| v.picture(&self.scene)).collect();
+        save_eval_picture(&pictures, &self.eval.dir.join(format!("step_{step:06}.png")))?;
+        let mean = |f: fn(&super::eval::ViewEval) -> f64| views.iter().map(f).sum::<f64>() / views.len().max(1) as f64;
+        if n_styles > 0 {
+            return Ok(Vec::new());
+        }
+        Ok(vec![
+            ("val_psnr".to_string(), mean(|v| v.psnr)),
+            ("val_ssim".to_string(), mean(|v| v.ssim)),
+        ])
+    }
+}
+
+impl Task for NerfTask {
+    type Model = NerfModel;
+    type Objective = NerfObjective;
+
+    fn terms(&self, objective: NerfObjective) -> &'static [&'static str] {
+        match (objective, self.sampler) {
+            (NerfObjective::Pretrain, Sampler::CoarseFine { .. }) => &["mse", "mse_coarse"],
+            (NerfObjective::Pretrain, Sampler::Marching { .. }) => &["mse"],
+            (NerfObjective::Stylize, _) => &["style", "content", "geometry"],
+        }
+    }
+
+    fn losses(&mut self, model: &NerfModel, step: &StepContext<NerfObjective>) -> Result<LossTerms> {
+        match step.phase.objective {
+            NerfObjective::Pretrain => self.pretrain_losses(model, step.seed),
+            NerfObjective::Stylize => self.stylize_losses(model, step.seed),
+        }
+    }
+
+    fn after_step(&mut self, model: &NerfModel, step: &StepContext<NerfObjective>) -> Result<Vec<(String, f64)>> {
+        if self.last_rays > 0 {
+            let per_ray = self.last_samples as f32 / self.last_rays as f32;
+            self.samples_per_ray = 0.9 * self.samples_per_ray + 0.1 * per_ray.max(1.0);
+        }
+        if let Sampler::Marching { refresh_every, .. } = self.sampler
+            && refresh_every > 0
+            && step.phase.objective == NerfObjective::Pretrain
+            && step.step_in_phase.is_multiple_of(refresh_every)
+        {
+            self.refresh_grid(model, step.step_in_phase, step.seed ^ 0x0cc0_9a1d);
+        }
+        let done = step.step_in_phase + 1;
+        if self.eval.every > 0 && done.is_multiple_of(self.eval.every) && !self.eval.views.is_empty() {
+            return self.evaluate(model, step.global_step + 1);
+        }
+        Ok(Vec::new())
+    }
+
+    fn save_state(&self) -> Result<Option<Vec<u8>>> {
+        Ok(Some(super::state_io::encode(self.samples_per_ray, self.grid.as_ref())))
+    }
+
+    fn load_state(&mut self, bytes: &[u8]) -> Result<()> {
+        let (samples_per_ray, grid) = super::state_io::decode(bytes)?;
+        self.samples_per_ray = samples_per_ray;
+        if grid.is_some() {
+            self.grid = grid;
+        }
+        Ok(())
+    }
+}
