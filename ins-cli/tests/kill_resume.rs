@@ -95,13 +95,35 @@ fn wait_for_checkpoint_write(run: &Path, limit: Duration) -> bool {
     false
 }
 
+/// The last step recorded in the run's metrics, if any.
+fn last_logged_step(run: &Path) -> Option<u64> {
+    let log = std::fs::read_to_string(run.join("metrics.jsonl")).ok()?;
+    log.lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|v| v["step"].as_u64())
+        .last()
+}
+
+/// Waits until the run has logged `step` (true) or the process ended or time ran out (false).
+fn wait_for_step(run: &Path, child: &mut Child, step: u64, limit: Duration) -> bool {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        if child.try_wait().unwrap().is_some() {
+            return false;
+        }
+        if last_logged_step(run).is_some_and(|s| s >= step) {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    false
+}
+
 #[test]
 fn killed_runs_resume_to_the_same_parameters_as_an_uninterrupted_one() {
     let dir = tempfile::tempdir().unwrap();
     let a: PathBuf = dir.path().join("uninterrupted");
-    let start = Instant::now();
     finish(spawn(&a, false, None));
-    let full = start.elapsed();
 
     let b: PathBuf = dir.path().join("killed");
     // The demo inputs the first run generated; the killed run must train on the same ones.
@@ -122,12 +144,15 @@ fn killed_runs_resume_to_the_same_parameters_as_an_uninterrupted_one() {
     child.wait().unwrap();
     kills += 1;
     assert_latest_complete(&b);
-    // Then at random moments, resuming each time (or starting again when nothing was saved).
+    // Then at random moments: after a random number of newly logged steps plus a random
+    // fraction of a step, resuming each time (or starting again when nothing was saved).
+    // Counting steps rather than seconds keeps every kill inside the run on a fast machine.
     for _ in 0..4 {
-        let delay = rng.random_range(0.1..0.9) * full.as_secs_f64();
+        let target = last_logged_step(&b).map_or(0, |s| s + 1) + rng.random_range(1..=6);
         let mut child = spawn(&b, has_checkpoint(&b), None);
-        std::thread::sleep(Duration::from_secs_f64(delay));
-        if child.try_wait().unwrap().is_none() {
+        let landed = wait_for_step(&b, &mut child, target, Duration::from_secs(120));
+        std::thread::sleep(Duration::from_millis(rng.random_range(0..40)));
+        if landed && child.try_wait().unwrap().is_none() {
             child.kill().unwrap();
             kills += 1;
         }
