@@ -8,6 +8,7 @@ pub mod backend;
 pub mod data;
 pub mod imaging;
 pub mod loss;
+pub mod mesh;
 pub mod modules;
 pub mod render;
 pub mod train;

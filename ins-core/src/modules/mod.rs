@@ -7,6 +7,8 @@
 //! - [`ins::Ins`]: the three composed, the library API for custom INRs.
 //! - [`field::Field`]: radiance fields for 3D (hash-grid or NeRF-MLP geometry, view-dependent
 //!   colour); [`radiance_am::RadianceAm`] fuses them with style features.
+//! - [`sdf::SdfNet`]: signed distance networks for surfaces (IDR MLP or hash grid), with exact
+//!   forward-mode normals.
 //! - [`hash_grid::HashGrid`]: the multiresolution hash encoding of the fast 3D content modules.
 
 pub mod am;
@@ -20,6 +22,8 @@ pub mod ins;
 pub mod mlp;
 pub mod mlp_field;
 pub mod radiance_am;
+pub mod sdf;
 pub mod sh;
 pub mod sim;
 pub mod sine;
+pub mod surface_color;

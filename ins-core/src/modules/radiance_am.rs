@@ -79,6 +79,29 @@ impl RadianceAmConfig {
     }
 }
 
+impl FeatureBlend {
+    /// A feature blend alone (surfaces have no density to stylize): `[f, s]` → `depth`
+    /// linear layers of width `d_hidden` → `d_features`, with γ = 1.
+    pub fn new(d_features: usize, d_style: usize, d_hidden: usize, depth: usize, device: &Device) -> Self {
+        RadianceAmConfig::new(d_features, d_style)
+            .with_d_hidden(d_hidden)
+            .with_feature_depth(depth)
+            .init(device)
+            .feature
+    }
+
+    /// `features [N, F]`, `style [N, S]` → `γ·f + (1−γ)·mlp([f, s])`.
+    pub fn forward(&self, features: Tensor<2>, style: Tensor<2>) -> Tensor<2> {
+        let fs = Tensor::cat(vec![features.clone(), style], 1);
+        let last = self.layers.len() - 1;
+        let f_s = self.layers.iter().enumerate().fold(fs, |h, (i, l)| {
+            let h = l.forward(h);
+            if i < last { relu(h) } else { h }
+        });
+        blend(self.gamma.val(), features, f_s)
+    }
+}
+
 fn blend<const D: usize>(w: Tensor<1>, a: Tensor<D>, b: Tensor<D>) -> Tensor<D> {
     let w = w.reshape([1; D]);
     a * w.clone() + b * w.neg().add_scalar(1.0)
@@ -89,17 +112,12 @@ impl RadianceAm {
     /// features `[N, F]`.
     pub fn forward(&self, sigma: Tensor<1>, features: Tensor<2>, style: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
         let [n, _] = features.dims();
-        let fs = Tensor::cat(vec![features.clone(), style], 1);
+        let fs = Tensor::cat(vec![features.clone(), style.clone()], 1);
         let d = &self.density;
-        let sigma_s = d.out.forward(relu(d.hidden.forward(fs.clone()))).reshape([n]);
-        let last = self.feature.layers.len() - 1;
-        let f_s = self.feature.layers.iter().enumerate().fold(fs, |h, (i, l)| {
-            let h = l.forward(h);
-            if i < last { relu(h) } else { h }
-        });
+        let sigma_s = d.out.forward(relu(d.hidden.forward(fs))).reshape([n]);
         (
             blend(d.lambda.val(), sigma, sigma_s),
-            blend(self.feature.gamma.val(), features, f_s),
+            self.feature.forward(features, style),
         )
     }
 }

@@ -1,5 +1,5 @@
 //! Cameras, rays, ray patches and render paths; samplers along rays (stratified, hierarchical,
-//! occupancy-grid marching) and volume compositing.
+//! occupancy-grid marching), volume compositing, and sphere tracing of signed distance fields.
 //!
 //! One camera convention for everything (see [`camera`]): camera-to-world, OpenGL axes (x right,
 //! y up, looking down −z), pixel centres at `(u + 0.5, v + 0.5)`.
@@ -11,4 +11,5 @@ pub mod patches;
 pub mod paths;
 pub mod rays;
 pub mod samplers;
+pub mod sphere_tracing;
 pub mod volume;

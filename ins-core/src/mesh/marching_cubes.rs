@@ -1,0 +1,1394 @@
+//! Iso-surface extraction from a sampled scalar field with classic
+//! Lorensen–Cline marching cubes (standard 256-case edge/triangle tables).
+//!
+//! * Input: a [`Grid`] of `res[0] × res[1] × res[2]` samples (x fastest) on an
+//!   axis-aligned box.
+//! * Output: an indexed triangle [`Mesh`] with per-vertex normals.
+//! * Convention: the field is a signed distance, **negative inside**. A corner is
+//!   "inside" when `value < level`. Triangles are wound counter-clockwise when seen
+//!   from the side of increasing values, so face normals point outward, and vertex
+//!   normals are the normalized central-difference gradient of the samples,
+//!   linearly interpolated to the vertex (also outward).
+//! * Every vertex lies on a grid edge and is created once per edge, so a closed
+//!   surface that stays inside the box gives a watertight, consistently oriented
+//!   mesh (every undirected edge is used by exactly two triangles, in opposite
+//!   directions).
+//! * A cube with a NaN corner produces no triangles. Gradients skip NaN neighbours
+//!   when possible; if a vertex normal still cannot be computed it falls back to the
+//!   area-weighted average of the adjacent face normals.
+//!
+//! No dependencies; memory use is the output plus a few `O(res[0]·res[1])` edge
+//! caches (nothing is allocated per cube).
+
+use std::io::{self, Write};
+
+/// A triangle mesh.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex positions.
+    pub vertices: Vec<[f32; 3]>,
+    /// Unit per-vertex normals (same length as `vertices`).
+    pub normals: Vec<[f32; 3]>,
+    /// Vertex indices, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    /// Total surface area.
+    pub fn area(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = self.tri_f64(t);
+                0.5 * norm64(cross64(sub64(b, a), sub64(c, a)))
+            })
+            .sum()
+    }
+
+    /// Enclosed volume (signed, by the divergence theorem; positive for
+    /// outward-oriented closed meshes).
+    pub fn volume(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = self.tri_f64(t);
+                dot64(a, cross64(b, c))
+            })
+            .sum::<f64>()
+            / 6.0
+    }
+
+    /// Writes a binary little-endian PLY (vertex `x y z`, `nx ny nz` as float,
+    /// `red green blue` as uchar; face `list uchar int vertex_indices`) that
+    /// MeshLab/Blender/Open3D open.
+    ///
+    /// `colors` is one `[u8; 3]` per vertex. Returns an error of kind
+    /// [`io::ErrorKind::InvalidInput`] if `colors.len()` or `normals.len()` differs
+    /// from `vertices.len()`, if a triangle index is out of range, or if there are
+    /// more than `i32::MAX` vertices.
+    pub fn write_ply(&self, w: &mut impl Write, colors: &[[u8; 3]]) -> io::Result<()> {
+        let nv = self.vertices.len();
+        let invalid = |msg: String| io::Error::new(io::ErrorKind::InvalidInput, msg);
+        if colors.len() != nv {
+            return Err(invalid(format!(
+                "write_ply: {} colors for {} vertices",
+                colors.len(),
+                nv
+            )));
+        }
+        if self.normals.len() != nv {
+            return Err(invalid(format!(
+                "write_ply: {} normals for {} vertices",
+                self.normals.len(),
+                nv
+            )));
+        }
+        if nv > i32::MAX as usize {
+            return Err(invalid(format!("write_ply: too many vertices ({nv})")));
+        }
+        if let Some(t) = self
+            .triangles
+            .iter()
+            .find(|t| t.iter().any(|&i| i as usize >= nv))
+        {
+            return Err(invalid(format!(
+                "write_ply: triangle {t:?} references a vertex >= {nv}"
+            )));
+        }
+
+        let header = format!(
+            "ply\n\
+             format binary_little_endian 1.0\n\
+             comment written by marching_cubes\n\
+             element vertex {nv}\n\
+             property float x\n\
+             property float y\n\
+             property float z\n\
+             property float nx\n\
+             property float ny\n\
+             property float nz\n\
+             property uchar red\n\
+             property uchar green\n\
+             property uchar blue\n\
+             element face {}\n\
+             property list uchar int vertex_indices\n\
+             end_header\n",
+            self.triangles.len()
+        );
+        w.write_all(header.as_bytes())?;
+
+        const CHUNK: usize = 1 << 16;
+        let mut buf: Vec<u8> = Vec::with_capacity(CHUNK + 64);
+        for ((p, n), c) in self.vertices.iter().zip(&self.normals).zip(colors) {
+            for v in p.iter().chain(n.iter()) {
+                buf.extend_from_slice(&v.to_le_bytes());
+            }
+            buf.extend_from_slice(c);
+            if buf.len() >= CHUNK {
+                w.write_all(&buf)?;
+                buf.clear();
+            }
+        }
+        for t in &self.triangles {
+            buf.push(3);
+            for &i in t {
+                buf.extend_from_slice(&(i as i32).to_le_bytes());
+            }
+            if buf.len() >= CHUNK {
+                w.write_all(&buf)?;
+                buf.clear();
+            }
+        }
+        w.write_all(&buf)?;
+        w.flush()
+    }
+
+    fn tri_f64(&self, t: &[u32; 3]) -> [[f64; 3]; 3] {
+        t.map(|i| self.vertices[i as usize].map(f64::from))
+    }
+}
+
+/// The grid: `res[0] × res[1] × res[2]` samples on the axis-aligned box
+/// `[min, max]` (sample `(i,j,k)` at `min + (max−min)·(i,j,k)/(res−1)`), values in
+/// x-fastest order (index `i + res0*(j + res1*k)`).
+#[derive(Debug, Clone, Copy)]
+pub struct Grid<'a> {
+    /// Number of samples along x, y, z.
+    pub res: [usize; 3],
+    /// Position of sample `(0, 0, 0)`.
+    pub min: [f32; 3],
+    /// Position of sample `(res0-1, res1-1, res2-1)`.
+    pub max: [f32; 3],
+    /// `res0*res1*res2` samples, x fastest.
+    pub values: &'a [f32],
+}
+
+/// Extracts the `level` iso-surface.
+///
+/// Convention: the field is a signed distance, NEGATIVE INSIDE (a sample is inside
+/// when `value < level`); triangles are wound so that their normals point towards
+/// increasing values (outward); per-vertex normals are the normalized
+/// central-difference gradient of the grid values interpolated at the vertex
+/// (pointing outward). Vertices on shared cube edges are shared, so the mesh is
+/// watertight for a closed surface inside the box. Cubes with a NaN corner are
+/// skipped. If any `res` component is below 2 (or `level` is NaN) the mesh is empty.
+///
+/// # Panics
+/// If `grid.values.len() != res[0]*res[1]*res[2]`, or if the mesh would need more
+/// than `u32::MAX` vertices.
+pub fn marching_cubes(grid: &Grid, level: f32) -> Mesh {
+    let [nx, ny, nz] = grid.res;
+    let total = nx
+        .checked_mul(ny)
+        .and_then(|v| v.checked_mul(nz))
+        .expect("marching_cubes: grid resolution overflows usize");
+    assert_eq!(
+        grid.values.len(),
+        total,
+        "marching_cubes: values.len() must equal res[0]*res[1]*res[2]"
+    );
+    let mut mesh = Mesh::default();
+    if nx < 2 || ny < 2 || nz < 2 || level.is_nan() {
+        return mesh;
+    }
+
+    let ex = Extractor::new(grid, level);
+    let values = grid.values;
+    let (sy, sz) = (nx, nx * ny);
+
+    // Edge -> vertex caches. x- and y-edges of the lower (z = k) and upper
+    // (z = k+1) sample layers of the current slab, and the z-edges between them.
+    let mut xe_lo = vec![NONE; (nx - 1) * ny];
+    let mut xe_hi = vec![NONE; (nx - 1) * ny];
+    let mut ye_lo = vec![NONE; nx * (ny - 1)];
+    let mut ye_hi = vec![NONE; nx * (ny - 1)];
+    let mut ze = vec![NONE; nx * ny];
+    let mut need_fallback_normals = false;
+
+    for k in 0..nz - 1 {
+        if k > 0 {
+            std::mem::swap(&mut xe_lo, &mut xe_hi);
+            std::mem::swap(&mut ye_lo, &mut ye_hi);
+            xe_hi.fill(NONE);
+            ye_hi.fill(NONE);
+            ze.fill(NONE);
+        }
+        for j in 0..ny - 1 {
+            let b00 = j * sy + k * sz;
+            let r00 = &values[b00..b00 + nx]; // (y=j,   z=k)
+            let r10 = &values[b00 + sy..b00 + sy + nx]; // (y=j+1, z=k)
+            let r01 = &values[b00 + sz..b00 + sz + nx]; // (y=j,   z=k+1)
+            let r11 = &values[b00 + sy + sz..b00 + sy + sz + nx]; // (y=j+1, z=k+1)
+            for i in 0..nx - 1 {
+                // Corner order of the classic tables (see CORNER_OFFSET).
+                let v = [
+                    r00[i],
+                    r00[i + 1],
+                    r10[i + 1],
+                    r10[i],
+                    r01[i],
+                    r01[i + 1],
+                    r11[i + 1],
+                    r11[i],
+                ];
+                let mut case = 0usize;
+                for (c, &val) in v.iter().enumerate() {
+                    case |= usize::from(val < level) << c;
+                }
+                // A NaN corner never sets its bit, so an all-NaN/outside cube is 0;
+                // a NaN cube can never be 255.
+                if case == 0 || case == 255 || v.iter().any(|x| x.is_nan()) {
+                    continue;
+                }
+
+                let edges = EDGE_TABLE[case];
+                let mut ev = [0u32; 12];
+                for (e, slot_out) in ev.iter_mut().enumerate() {
+                    if edges & (1 << e) == 0 {
+                        continue;
+                    }
+                    let slot = match e {
+                        0 => &mut xe_lo[i + (nx - 1) * j],
+                        2 => &mut xe_lo[i + (nx - 1) * (j + 1)],
+                        4 => &mut xe_hi[i + (nx - 1) * j],
+                        6 => &mut xe_hi[i + (nx - 1) * (j + 1)],
+                        3 => &mut ye_lo[i + nx * j],
+                        1 => &mut ye_lo[i + 1 + nx * j],
+                        7 => &mut ye_hi[i + nx * j],
+                        5 => &mut ye_hi[i + 1 + nx * j],
+                        8 => &mut ze[i + nx * j],
+                        9 => &mut ze[i + 1 + nx * j],
+                        11 => &mut ze[i + nx * (j + 1)],
+                        _ => &mut ze[i + 1 + nx * (j + 1)], // 10
+                    };
+                    if *slot == NONE {
+                        let (lo, hi, axis) = EDGE_CORNERS[e];
+                        let o = CORNER_OFFSET[lo];
+                        let ok = ex.make_vertex(
+                            &mut mesh,
+                            [i + o[0], j + o[1], k + o[2]],
+                            axis,
+                            v[lo],
+                            v[hi],
+                        );
+                        need_fallback_normals |= !ok;
+                        *slot = u32::try_from(mesh.vertices.len() - 1)
+                            .expect("marching_cubes: more than u32::MAX vertices");
+                    }
+                    *slot_out = *slot;
+                }
+
+                let tri = &TRI_TABLE[case];
+                let mut t = 0;
+                while t < 16 && tri[t] >= 0 {
+                    let a = ev[tri[t] as usize];
+                    let b = ev[tri[t + 1] as usize];
+                    let c = ev[tri[t + 2] as usize];
+                    // The classic table winds triangles towards the inside (for a
+                    // right-handed box); flip so normals point to increasing values.
+                    mesh.triangles
+                        .push(if ex.flip { [a, b, c] } else { [a, c, b] });
+                    t += 3;
+                }
+            }
+        }
+    }
+
+    if need_fallback_normals {
+        fallback_normals(&mut mesh);
+    }
+    mesh
+}
+
+const NONE: u32 = u32::MAX;
+
+/// Offsets of the 8 cube corners (classic numbering).
+const CORNER_OFFSET: [[usize; 3]; 8] = [
+    [0, 0, 0],
+    [1, 0, 0],
+    [1, 1, 0],
+    [0, 1, 0],
+    [0, 0, 1],
+    [1, 0, 1],
+    [1, 1, 1],
+    [0, 1, 1],
+];
+
+/// For each of the 12 cube edges: (corner with the lower coordinate, other corner,
+/// axis the edge runs along).
+const EDGE_CORNERS: [(usize, usize, usize); 12] = [
+    (0, 1, 0),
+    (1, 2, 1),
+    (3, 2, 0),
+    (0, 3, 1),
+    (4, 5, 0),
+    (5, 6, 1),
+    (7, 6, 0),
+    (4, 7, 1),
+    (0, 4, 2),
+    (1, 5, 2),
+    (2, 6, 2),
+    (3, 7, 2),
+];
+
+struct Extractor<'g> {
+    values: &'g [f32],
+    res: [usize; 3],
+    stride: [usize; 3],
+    /// Sample coordinates along each axis.
+    coords: [Vec<f32>; 3],
+    /// Sample spacing along each axis (may be negative if max < min).
+    spacing: [f32; 3],
+    level: f32,
+    /// Reverse the winding (an odd number of axes has max < min).
+    flip: bool,
+}
+
+impl<'g> Extractor<'g> {
+    fn new(grid: &Grid<'g>, level: f32) -> Self {
+        let res = grid.res;
+        let coords = std::array::from_fn(|a| {
+            let d = (res[a] - 1) as f32;
+            (0..res[a])
+                .map(|i| grid.min[a] + (grid.max[a] - grid.min[a]) * (i as f32) / d)
+                .collect()
+        });
+        let spacing: [f32; 3] =
+            std::array::from_fn(|a| (grid.max[a] - grid.min[a]) / (res[a] - 1) as f32);
+        let negatives = spacing.iter().filter(|h| **h < 0.0).count();
+        Extractor {
+            values: grid.values,
+            res,
+            stride: [1, res[0], res[0] * res[1]],
+            coords,
+            spacing,
+            level,
+            flip: negatives % 2 == 1,
+        }
+    }
+
+    /// Appends the vertex on the edge from sample `p` to `p + e_axis` (values
+    /// `v0`, `v1`). Returns false if its normal could not be computed.
+    fn make_vertex(&self, mesh: &mut Mesh, p: [usize; 3], axis: usize, v0: f32, v1: f32) -> bool {
+        let d = v1 - v0;
+        let t = if d != 0.0 {
+            ((self.level - v0) / d).clamp(0.0, 1.0)
+        } else {
+            0.5
+        };
+        let mut pos = [
+            self.coords[0][p[0]],
+            self.coords[1][p[1]],
+            self.coords[2][p[2]],
+        ];
+        let c0 = self.coords[axis][p[axis]];
+        let c1 = self.coords[axis][p[axis] + 1];
+        pos[axis] = c0 + t * (c1 - c0);
+
+        let mut q = p;
+        q[axis] += 1;
+        let g0 = self.gradient(p);
+        let g1 = self.gradient(q);
+        let g: [f32; 3] = std::array::from_fn(|a| g0[a] + t * (g1[a] - g0[a]));
+        let len = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        let (n, ok) = if len.is_finite() && len > 0.0 {
+            (g.map(|x| x / len), true)
+        } else {
+            ([0.0; 3], false)
+        };
+        mesh.vertices.push(pos);
+        mesh.normals.push(n);
+        ok
+    }
+
+    /// Finite-difference gradient at sample `p`: central where possible, one-sided
+    /// at the border or next to NaN samples; a component is 0 if none is finite.
+    fn gradient(&self, p: [usize; 3]) -> [f32; 3] {
+        let idx = p[0] + self.stride[1] * p[1] + self.stride[2] * p[2];
+        let f0 = self.values[idx];
+        std::array::from_fn(|a| {
+            let (c, n, s, h) = (p[a], self.res[a], self.stride[a], self.spacing[a]);
+            let fwd = (c + 1 < n).then(|| self.values[idx + s]);
+            let bwd = (c > 0).then(|| self.values[idx - s]);
+            let candidates = [
+                match (fwd, bwd) {
+                    (Some(f), Some(b)) => (f - b) / (2.0 * h),
+                    _ => f32::NAN,
+                },
+                fwd.map_or(f32::NAN, |f| (f - f0) / h),
+                bwd.map_or(f32::NAN, |b| (f0 - b) / h),
+            ];
+            candidates
+                .into_iter()
+                .find(|x| x.is_finite())
+                .unwrap_or(0.0)
+        })
+    }
+}
+
+/// Replaces zero normals by the normalized sum of adjacent (area-weighted) face
+/// normals.
+fn fallback_normals(mesh: &mut Mesh) {
+    let mut acc = vec![[0.0f64; 3]; mesh.vertices.len()];
+    let missing: Vec<bool> = mesh.normals.iter().map(|n| *n == [0.0; 3]).collect();
+    for t in &mesh.triangles {
+        if !t.iter().any(|&i| missing[i as usize]) {
+            continue;
+        }
+        let [a, b, c] = mesh.tri_f64(t);
+        let n = cross64(sub64(b, a), sub64(c, a));
+        for &i in t {
+            for d in 0..3 {
+                acc[i as usize][d] += n[d];
+            }
+        }
+    }
+    for (i, n) in mesh.normals.iter_mut().enumerate() {
+        if missing[i] {
+            let len = norm64(acc[i]);
+            if len > 0.0 && len.is_finite() {
+                *n = acc[i].map(|x| (x / len) as f32);
+            }
+        }
+    }
+}
+
+fn sub64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross64(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+fn dot64(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn norm64(a: [f64; 3]) -> f64 {
+    dot64(a, a).sqrt()
+}
+
+/// Bit `e` is set if cube edge `e` is crossed, indexed by the case (bit `c` set if
+/// corner `c` is inside).
+#[rustfmt::skip]
+const EDGE_TABLE: [u16; 256] = [
+    0x000, 0x109, 0x203, 0x30a, 0x406, 0x50f, 0x605, 0x70c,
+    0x80c, 0x905, 0xa0f, 0xb06, 0xc0a, 0xd03, 0xe09, 0xf00,
+    0x190, 0x099, 0x393, 0x29a, 0x596, 0x49f, 0x795, 0x69c,
+    0x99c, 0x895, 0xb9f, 0xa96, 0xd9a, 0xc93, 0xf99, 0xe90,
+    0x230, 0x339, 0x033, 0x13a, 0x636, 0x73f, 0x435, 0x53c,
+    0xa3c, 0xb35, 0x83f, 0x936, 0xe3a, 0xf33, 0xc39, 0xd30,
+    0x3a0, 0x2a9, 0x1a3, 0x0aa, 0x7a6, 0x6af, 0x5a5, 0x4ac,
+    0xbac, 0xaa5, 0x9af, 0x8a6, 0xfaa, 0xea3, 0xda9, 0xca0,
+    0x460, 0x569, 0x663, 0x76a, 0x066, 0x16f, 0x265, 0x36c,
+    0xc6c, 0xd65, 0xe6f, 0xf66, 0x86a, 0x963, 0xa69, 0xb60,
+    0x5f0, 0x4f9, 0x7f3, 0x6fa, 0x1f6, 0x0ff, 0x3f5, 0x2fc,
+    0xdfc, 0xcf5, 0xfff, 0xef6, 0x9fa, 0x8f3, 0xbf9, 0xaf0,
+    0x650, 0x759, 0x453, 0x55a, 0x256, 0x35f, 0x055, 0x15c,
+    0xe5c, 0xf55, 0xc5f, 0xd56, 0xa5a, 0xb53, 0x859, 0x950,
+    0x7c0, 0x6c9, 0x5c3, 0x4ca, 0x3c6, 0x2cf, 0x1c5, 0x0cc,
+    0xfcc, 0xec5, 0xdcf, 0xcc6, 0xbca, 0xac3, 0x9c9, 0x8c0,
+    0x8c0, 0x9c9, 0xac3, 0xbca, 0xcc6, 0xdcf, 0xec5, 0xfcc,
+    0x0cc, 0x1c5, 0x2cf, 0x3c6, 0x4ca, 0x5c3, 0x6c9, 0x7c0,
+    0x950, 0x859, 0xb53, 0xa5a, 0xd56, 0xc5f, 0xf55, 0xe5c,
+    0x15c, 0x055, 0x35f, 0x256, 0x55a, 0x453, 0x759, 0x650,
+    0xaf0, 0xbf9, 0x8f3, 0x9fa, 0xef6, 0xfff, 0xcf5, 0xdfc,
+    0x2fc, 0x3f5, 0x0ff, 0x1f6, 0x6fa, 0x7f3, 0x4f9, 0x5f0,
+    0xb60, 0xa69, 0x963, 0x86a, 0xf66, 0xe6f, 0xd65, 0xc6c,
+    0x36c, 0x265, 0x16f, 0x066, 0x76a, 0x663, 0x569, 0x460,
+    0xca0, 0xda9, 0xea3, 0xfaa, 0x8a6, 0x9af, 0xaa5, 0xbac,
+    0x4ac, 0x5a5, 0x6af, 0x7a6, 0x0aa, 0x1a3, 0x2a9, 0x3a0,
+    0xd30, 0xc39, 0xf33, 0xe3a, 0x936, 0x83f, 0xb35, 0xa3c,
+    0x53c, 0x435, 0x73f, 0x636, 0x13a, 0x033, 0x339, 0x230,
+    0xe90, 0xf99, 0xc93, 0xd9a, 0xa96, 0xb9f, 0x895, 0x99c,
+    0x69c, 0x795, 0x49f, 0x596, 0x29a, 0x393, 0x099, 0x190,
+    0xf00, 0xe09, 0xd03, 0xc0a, 0xb06, 0xa0f, 0x905, 0x80c,
+    0x70c, 0x605, 0x50f, 0x406, 0x30a, 0x203, 0x109, 0x000,
+];
+
+/// Triangles (as triples of cube edges, `-1`-terminated) for each case.
+#[rustfmt::skip]
+const TRI_TABLE: [[i8; 16]; 256] = [
+    [-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 3, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 1, 9, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 8, 3, 9, 8, 1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 10, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 3, 1, 2, 10, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [9, 2, 10, 0, 2, 9, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [2, 8, 3, 2, 10, 8, 10, 9, 8, -1, -1, -1, -1, -1, -1, -1],
+    [3, 11, 2, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 11, 2, 8, 11, 0, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 9, 0, 2, 3, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 11, 2, 1, 9, 11, 9, 8, 11, -1, -1, -1, -1, -1, -1, -1],
+    [3, 10, 1, 11, 10, 3, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 10, 1, 0, 8, 10, 8, 11, 10, -1, -1, -1, -1, -1, -1, -1],
+    [3, 9, 0, 3, 11, 9, 11, 10, 9, -1, -1, -1, -1, -1, -1, -1],
+    [9, 8, 10, 10, 8, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 7, 8, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 3, 0, 7, 3, 4, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 1, 9, 8, 4, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 1, 9, 4, 7, 1, 7, 3, 1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 10, 8, 4, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [3, 4, 7, 3, 0, 4, 1, 2, 10, -1, -1, -1, -1, -1, -1, -1],
+    [9, 2, 10, 9, 0, 2, 8, 4, 7, -1, -1, -1, -1, -1, -1, -1],
+    [2, 10, 9, 2, 9, 7, 2, 7, 3, 7, 9, 4, -1, -1, -1, -1],
+    [8, 4, 7, 3, 11, 2, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [11, 4, 7, 11, 2, 4, 2, 0, 4, -1, -1, -1, -1, -1, -1, -1],
+    [9, 0, 1, 8, 4, 7, 2, 3, 11, -1, -1, -1, -1, -1, -1, -1],
+    [4, 7, 11, 9, 4, 11, 9, 11, 2, 9, 2, 1, -1, -1, -1, -1],
+    [3, 10, 1, 3, 11, 10, 7, 8, 4, -1, -1, -1, -1, -1, -1, -1],
+    [1, 11, 10, 1, 4, 11, 1, 0, 4, 7, 11, 4, -1, -1, -1, -1],
+    [4, 7, 8, 9, 0, 11, 9, 11, 10, 11, 0, 3, -1, -1, -1, -1],
+    [4, 7, 11, 4, 11, 9, 9, 11, 10, -1, -1, -1, -1, -1, -1, -1],
+    [9, 5, 4, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [9, 5, 4, 0, 8, 3, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 5, 4, 1, 5, 0, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [8, 5, 4, 8, 3, 5, 3, 1, 5, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 10, 9, 5, 4, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [3, 0, 8, 1, 2, 10, 4, 9, 5, -1, -1, -1, -1, -1, -1, -1],
+    [5, 2, 10, 5, 4, 2, 4, 0, 2, -1, -1, -1, -1, -1, -1, -1],
+    [2, 10, 5, 3, 2, 5, 3, 5, 4, 3, 4, 8, -1, -1, -1, -1],
+    [9, 5, 4, 2, 3, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 11, 2, 0, 8, 11, 4, 9, 5, -1, -1, -1, -1, -1, -1, -1],
+    [0, 5, 4, 0, 1, 5, 2, 3, 11, -1, -1, -1, -1, -1, -1, -1],
+    [2, 1, 5, 2, 5, 8, 2, 8, 11, 4, 8, 5, -1, -1, -1, -1],
+    [10, 3, 11, 10, 1, 3, 9, 5, 4, -1, -1, -1, -1, -1, -1, -1],
+    [4, 9, 5, 0, 8, 1, 8, 10, 1, 8, 11, 10, -1, -1, -1, -1],
+    [5, 4, 0, 5, 0, 11, 5, 11, 10, 11, 0, 3, -1, -1, -1, -1],
+    [5, 4, 8, 5, 8, 10, 10, 8, 11, -1, -1, -1, -1, -1, -1, -1],
+    [9, 7, 8, 5, 7, 9, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [9, 3, 0, 9, 5, 3, 5, 7, 3, -1, -1, -1, -1, -1, -1, -1],
+    [0, 7, 8, 0, 1, 7, 1, 5, 7, -1, -1, -1, -1, -1, -1, -1],
+    [1, 5, 3, 3, 5, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [9, 7, 8, 9, 5, 7, 10, 1, 2, -1, -1, -1, -1, -1, -1, -1],
+    [10, 1, 2, 9, 5, 0, 5, 3, 0, 5, 7, 3, -1, -1, -1, -1],
+    [8, 0, 2, 8, 2, 5, 8, 5, 7, 10, 5, 2, -1, -1, -1, -1],
+    [2, 10, 5, 2, 5, 3, 3, 5, 7, -1, -1, -1, -1, -1, -1, -1],
+    [7, 9, 5, 7, 8, 9, 3, 11, 2, -1, -1, -1, -1, -1, -1, -1],
+    [9, 5, 7, 9, 7, 2, 9, 2, 0, 2, 7, 11, -1, -1, -1, -1],
+    [2, 3, 11, 0, 1, 8, 1, 7, 8, 1, 5, 7, -1, -1, -1, -1],
+    [11, 2, 1, 11, 1, 7, 7, 1, 5, -1, -1, -1, -1, -1, -1, -1],
+    [9, 5, 8, 8, 5, 7, 10, 1, 3, 10, 3, 11, -1, -1, -1, -1],
+    [5, 7, 0, 5, 0, 9, 7, 11, 0, 1, 0, 10, 11, 10, 0, -1],
+    [11, 10, 0, 11, 0, 3, 10, 5, 0, 8, 0, 7, 5, 7, 0, -1],
+    [11, 10, 5, 7, 11, 5, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [10, 6, 5, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 3, 5, 10, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [9, 0, 1, 5, 10, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 8, 3, 1, 9, 8, 5, 10, 6, -1, -1, -1, -1, -1, -1, -1],
+    [1, 6, 5, 2, 6, 1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 6, 5, 1, 2, 6, 3, 0, 8, -1, -1, -1, -1, -1, -1, -1],
+    [9, 6, 5, 9, 0, 6, 0, 2, 6, -1, -1, -1, -1, -1, -1, -1],
+    [5, 9, 8, 5, 8, 2, 5, 2, 6, 3, 2, 8, -1, -1, -1, -1],
+    [2, 3, 11, 10, 6, 5, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [11, 0, 8, 11, 2, 0, 10, 6, 5, -1, -1, -1, -1, -1, -1, -1],
+    [0, 1, 9, 2, 3, 11, 5, 10, 6, -1, -1, -1, -1, -1, -1, -1],
+    [5, 10, 6, 1, 9, 2, 9, 11, 2, 9, 8, 11, -1, -1, -1, -1],
+    [6, 3, 11, 6, 5, 3, 5, 1, 3, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 11, 0, 11, 5, 0, 5, 1, 5, 11, 6, -1, -1, -1, -1],
+    [3, 11, 6, 0, 3, 6, 0, 6, 5, 0, 5, 9, -1, -1, -1, -1],
+    [6, 5, 9, 6, 9, 11, 11, 9, 8, -1, -1, -1, -1, -1, -1, -1],
+    [5, 10, 6, 4, 7, 8, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 3, 0, 4, 7, 3, 6, 5, 10, -1, -1, -1, -1, -1, -1, -1],
+    [1, 9, 0, 5, 10, 6, 8, 4, 7, -1, -1, -1, -1, -1, -1, -1],
+    [10, 6, 5, 1, 9, 7, 1, 7, 3, 7, 9, 4, -1, -1, -1, -1],
+    [6, 1, 2, 6, 5, 1, 4, 7, 8, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 5, 5, 2, 6, 3, 0, 4, 3, 4, 7, -1, -1, -1, -1],
+    [8, 4, 7, 9, 0, 5, 0, 6, 5, 0, 2, 6, -1, -1, -1, -1],
+    [7, 3, 9, 7, 9, 4, 3, 2, 9, 5, 9, 6, 2, 6, 9, -1],
+    [3, 11, 2, 7, 8, 4, 10, 6, 5, -1, -1, -1, -1, -1, -1, -1],
+    [5, 10, 6, 4, 7, 2, 4, 2, 0, 2, 7, 11, -1, -1, -1, -1],
+    [0, 1, 9, 4, 7, 8, 2, 3, 11, 5, 10, 6, -1, -1, -1, -1],
+    [9, 2, 1, 9, 11, 2, 9, 4, 11, 7, 11, 4, 5, 10, 6, -1],
+    [8, 4, 7, 3, 11, 5, 3, 5, 1, 5, 11, 6, -1, -1, -1, -1],
+    [5, 1, 11, 5, 11, 6, 1, 0, 11, 7, 11, 4, 0, 4, 11, -1],
+    [0, 5, 9, 0, 6, 5, 0, 3, 6, 11, 6, 3, 8, 4, 7, -1],
+    [6, 5, 9, 6, 9, 11, 4, 7, 9, 7, 11, 9, -1, -1, -1, -1],
+    [10, 4, 9, 6, 4, 10, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 10, 6, 4, 9, 10, 0, 8, 3, -1, -1, -1, -1, -1, -1, -1],
+    [10, 0, 1, 10, 6, 0, 6, 4, 0, -1, -1, -1, -1, -1, -1, -1],
+    [8, 3, 1, 8, 1, 6, 8, 6, 4, 6, 1, 10, -1, -1, -1, -1],
+    [1, 4, 9, 1, 2, 4, 2, 6, 4, -1, -1, -1, -1, -1, -1, -1],
+    [3, 0, 8, 1, 2, 9, 2, 4, 9, 2, 6, 4, -1, -1, -1, -1],
+    [0, 2, 4, 4, 2, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [8, 3, 2, 8, 2, 4, 4, 2, 6, -1, -1, -1, -1, -1, -1, -1],
+    [10, 4, 9, 10, 6, 4, 11, 2, 3, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 2, 2, 8, 11, 4, 9, 10, 4, 10, 6, -1, -1, -1, -1],
+    [3, 11, 2, 0, 1, 6, 0, 6, 4, 6, 1, 10, -1, -1, -1, -1],
+    [6, 4, 1, 6, 1, 10, 4, 8, 1, 2, 1, 11, 8, 11, 1, -1],
+    [9, 6, 4, 9, 3, 6, 9, 1, 3, 11, 6, 3, -1, -1, -1, -1],
+    [8, 11, 1, 8, 1, 0, 11, 6, 1, 9, 1, 4, 6, 4, 1, -1],
+    [3, 11, 6, 3, 6, 0, 0, 6, 4, -1, -1, -1, -1, -1, -1, -1],
+    [6, 4, 8, 11, 6, 8, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [7, 10, 6, 7, 8, 10, 8, 9, 10, -1, -1, -1, -1, -1, -1, -1],
+    [0, 7, 3, 0, 10, 7, 0, 9, 10, 6, 7, 10, -1, -1, -1, -1],
+    [10, 6, 7, 1, 10, 7, 1, 7, 8, 1, 8, 0, -1, -1, -1, -1],
+    [10, 6, 7, 10, 7, 1, 1, 7, 3, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 6, 1, 6, 8, 1, 8, 9, 8, 6, 7, -1, -1, -1, -1],
+    [2, 6, 9, 2, 9, 1, 6, 7, 9, 0, 9, 3, 7, 3, 9, -1],
+    [7, 8, 0, 7, 0, 6, 6, 0, 2, -1, -1, -1, -1, -1, -1, -1],
+    [7, 3, 2, 6, 7, 2, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [2, 3, 11, 10, 6, 8, 10, 8, 9, 8, 6, 7, -1, -1, -1, -1],
+    [2, 0, 7, 2, 7, 11, 0, 9, 7, 6, 7, 10, 9, 10, 7, -1],
+    [1, 8, 0, 1, 7, 8, 1, 10, 7, 6, 7, 10, 2, 3, 11, -1],
+    [11, 2, 1, 11, 1, 7, 10, 6, 1, 6, 7, 1, -1, -1, -1, -1],
+    [8, 9, 6, 8, 6, 7, 9, 1, 6, 11, 6, 3, 1, 3, 6, -1],
+    [0, 9, 1, 11, 6, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [7, 8, 0, 7, 0, 6, 3, 11, 0, 11, 6, 0, -1, -1, -1, -1],
+    [7, 11, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [7, 6, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [3, 0, 8, 11, 7, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 1, 9, 11, 7, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [8, 1, 9, 8, 3, 1, 11, 7, 6, -1, -1, -1, -1, -1, -1, -1],
+    [10, 1, 2, 6, 11, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 10, 3, 0, 8, 6, 11, 7, -1, -1, -1, -1, -1, -1, -1],
+    [2, 9, 0, 2, 10, 9, 6, 11, 7, -1, -1, -1, -1, -1, -1, -1],
+    [6, 11, 7, 2, 10, 3, 10, 8, 3, 10, 9, 8, -1, -1, -1, -1],
+    [7, 2, 3, 6, 2, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [7, 0, 8, 7, 6, 0, 6, 2, 0, -1, -1, -1, -1, -1, -1, -1],
+    [2, 7, 6, 2, 3, 7, 0, 1, 9, -1, -1, -1, -1, -1, -1, -1],
+    [1, 6, 2, 1, 8, 6, 1, 9, 8, 8, 7, 6, -1, -1, -1, -1],
+    [10, 7, 6, 10, 1, 7, 1, 3, 7, -1, -1, -1, -1, -1, -1, -1],
+    [10, 7, 6, 1, 7, 10, 1, 8, 7, 1, 0, 8, -1, -1, -1, -1],
+    [0, 3, 7, 0, 7, 10, 0, 10, 9, 6, 10, 7, -1, -1, -1, -1],
+    [7, 6, 10, 7, 10, 8, 8, 10, 9, -1, -1, -1, -1, -1, -1, -1],
+    [6, 8, 4, 11, 8, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [3, 6, 11, 3, 0, 6, 0, 4, 6, -1, -1, -1, -1, -1, -1, -1],
+    [8, 6, 11, 8, 4, 6, 9, 0, 1, -1, -1, -1, -1, -1, -1, -1],
+    [9, 4, 6, 9, 6, 3, 9, 3, 1, 11, 3, 6, -1, -1, -1, -1],
+    [6, 8, 4, 6, 11, 8, 2, 10, 1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 10, 3, 0, 11, 0, 6, 11, 0, 4, 6, -1, -1, -1, -1],
+    [4, 11, 8, 4, 6, 11, 0, 2, 9, 2, 10, 9, -1, -1, -1, -1],
+    [10, 9, 3, 10, 3, 2, 9, 4, 3, 11, 3, 6, 4, 6, 3, -1],
+    [8, 2, 3, 8, 4, 2, 4, 6, 2, -1, -1, -1, -1, -1, -1, -1],
+    [0, 4, 2, 4, 6, 2, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 9, 0, 2, 3, 4, 2, 4, 6, 4, 3, 8, -1, -1, -1, -1],
+    [1, 9, 4, 1, 4, 2, 2, 4, 6, -1, -1, -1, -1, -1, -1, -1],
+    [8, 1, 3, 8, 6, 1, 8, 4, 6, 6, 10, 1, -1, -1, -1, -1],
+    [10, 1, 0, 10, 0, 6, 6, 0, 4, -1, -1, -1, -1, -1, -1, -1],
+    [4, 6, 3, 4, 3, 8, 6, 10, 3, 0, 3, 9, 10, 9, 3, -1],
+    [10, 9, 4, 6, 10, 4, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 9, 5, 7, 6, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 3, 4, 9, 5, 11, 7, 6, -1, -1, -1, -1, -1, -1, -1],
+    [5, 0, 1, 5, 4, 0, 7, 6, 11, -1, -1, -1, -1, -1, -1, -1],
+    [11, 7, 6, 8, 3, 4, 3, 5, 4, 3, 1, 5, -1, -1, -1, -1],
+    [9, 5, 4, 10, 1, 2, 7, 6, 11, -1, -1, -1, -1, -1, -1, -1],
+    [6, 11, 7, 1, 2, 10, 0, 8, 3, 4, 9, 5, -1, -1, -1, -1],
+    [7, 6, 11, 5, 4, 10, 4, 2, 10, 4, 0, 2, -1, -1, -1, -1],
+    [3, 4, 8, 3, 5, 4, 3, 2, 5, 10, 5, 2, 11, 7, 6, -1],
+    [7, 2, 3, 7, 6, 2, 5, 4, 9, -1, -1, -1, -1, -1, -1, -1],
+    [9, 5, 4, 0, 8, 6, 0, 6, 2, 6, 8, 7, -1, -1, -1, -1],
+    [3, 6, 2, 3, 7, 6, 1, 5, 0, 5, 4, 0, -1, -1, -1, -1],
+    [6, 2, 8, 6, 8, 7, 2, 1, 8, 4, 8, 5, 1, 5, 8, -1],
+    [9, 5, 4, 10, 1, 6, 1, 7, 6, 1, 3, 7, -1, -1, -1, -1],
+    [1, 6, 10, 1, 7, 6, 1, 0, 7, 8, 7, 0, 9, 5, 4, -1],
+    [4, 0, 10, 4, 10, 5, 0, 3, 10, 6, 10, 7, 3, 7, 10, -1],
+    [7, 6, 10, 7, 10, 8, 5, 4, 10, 4, 8, 10, -1, -1, -1, -1],
+    [6, 9, 5, 6, 11, 9, 11, 8, 9, -1, -1, -1, -1, -1, -1, -1],
+    [3, 6, 11, 0, 6, 3, 0, 5, 6, 0, 9, 5, -1, -1, -1, -1],
+    [0, 11, 8, 0, 5, 11, 0, 1, 5, 5, 6, 11, -1, -1, -1, -1],
+    [6, 11, 3, 6, 3, 5, 5, 3, 1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 10, 9, 5, 11, 9, 11, 8, 11, 5, 6, -1, -1, -1, -1],
+    [0, 11, 3, 0, 6, 11, 0, 9, 6, 5, 6, 9, 1, 2, 10, -1],
+    [11, 8, 5, 11, 5, 6, 8, 0, 5, 10, 5, 2, 0, 2, 5, -1],
+    [6, 11, 3, 6, 3, 5, 2, 10, 3, 10, 5, 3, -1, -1, -1, -1],
+    [5, 8, 9, 5, 2, 8, 5, 6, 2, 3, 8, 2, -1, -1, -1, -1],
+    [9, 5, 6, 9, 6, 0, 0, 6, 2, -1, -1, -1, -1, -1, -1, -1],
+    [1, 5, 8, 1, 8, 0, 5, 6, 8, 3, 8, 2, 6, 2, 8, -1],
+    [1, 5, 6, 2, 1, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 3, 6, 1, 6, 10, 3, 8, 6, 5, 6, 9, 8, 9, 6, -1],
+    [10, 1, 0, 10, 0, 6, 9, 5, 0, 5, 6, 0, -1, -1, -1, -1],
+    [0, 3, 8, 5, 6, 10, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [10, 5, 6, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [11, 5, 10, 7, 5, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [11, 5, 10, 11, 7, 5, 8, 3, 0, -1, -1, -1, -1, -1, -1, -1],
+    [5, 11, 7, 5, 10, 11, 1, 9, 0, -1, -1, -1, -1, -1, -1, -1],
+    [10, 7, 5, 10, 11, 7, 9, 8, 1, 8, 3, 1, -1, -1, -1, -1],
+    [11, 1, 2, 11, 7, 1, 7, 5, 1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 3, 1, 2, 7, 1, 7, 5, 7, 2, 11, -1, -1, -1, -1],
+    [9, 7, 5, 9, 2, 7, 9, 0, 2, 2, 11, 7, -1, -1, -1, -1],
+    [7, 5, 2, 7, 2, 11, 5, 9, 2, 3, 2, 8, 9, 8, 2, -1],
+    [2, 5, 10, 2, 3, 5, 3, 7, 5, -1, -1, -1, -1, -1, -1, -1],
+    [8, 2, 0, 8, 5, 2, 8, 7, 5, 10, 2, 5, -1, -1, -1, -1],
+    [9, 0, 1, 5, 10, 3, 5, 3, 7, 3, 10, 2, -1, -1, -1, -1],
+    [9, 8, 2, 9, 2, 1, 8, 7, 2, 10, 2, 5, 7, 5, 2, -1],
+    [1, 3, 5, 3, 7, 5, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 7, 0, 7, 1, 1, 7, 5, -1, -1, -1, -1, -1, -1, -1],
+    [9, 0, 3, 9, 3, 5, 5, 3, 7, -1, -1, -1, -1, -1, -1, -1],
+    [9, 8, 7, 5, 9, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [5, 8, 4, 5, 10, 8, 10, 11, 8, -1, -1, -1, -1, -1, -1, -1],
+    [5, 0, 4, 5, 11, 0, 5, 10, 11, 11, 3, 0, -1, -1, -1, -1],
+    [0, 1, 9, 8, 4, 10, 8, 10, 11, 10, 4, 5, -1, -1, -1, -1],
+    [10, 11, 4, 10, 4, 5, 11, 3, 4, 9, 4, 1, 3, 1, 4, -1],
+    [2, 5, 1, 2, 8, 5, 2, 11, 8, 4, 5, 8, -1, -1, -1, -1],
+    [0, 4, 11, 0, 11, 3, 4, 5, 11, 2, 11, 1, 5, 1, 11, -1],
+    [0, 2, 5, 0, 5, 9, 2, 11, 5, 4, 5, 8, 11, 8, 5, -1],
+    [9, 4, 5, 2, 11, 3, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [2, 5, 10, 3, 5, 2, 3, 4, 5, 3, 8, 4, -1, -1, -1, -1],
+    [5, 10, 2, 5, 2, 4, 4, 2, 0, -1, -1, -1, -1, -1, -1, -1],
+    [3, 10, 2, 3, 5, 10, 3, 8, 5, 4, 5, 8, 0, 1, 9, -1],
+    [5, 10, 2, 5, 2, 4, 1, 9, 2, 9, 4, 2, -1, -1, -1, -1],
+    [8, 4, 5, 8, 5, 3, 3, 5, 1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 4, 5, 1, 0, 5, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [8, 4, 5, 8, 5, 3, 9, 0, 5, 0, 3, 5, -1, -1, -1, -1],
+    [9, 4, 5, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 11, 7, 4, 9, 11, 9, 10, 11, -1, -1, -1, -1, -1, -1, -1],
+    [0, 8, 3, 4, 9, 7, 9, 11, 7, 9, 10, 11, -1, -1, -1, -1],
+    [1, 10, 11, 1, 11, 4, 1, 4, 0, 7, 4, 11, -1, -1, -1, -1],
+    [3, 1, 4, 3, 4, 8, 1, 10, 4, 7, 4, 11, 10, 11, 4, -1],
+    [4, 11, 7, 9, 11, 4, 9, 2, 11, 9, 1, 2, -1, -1, -1, -1],
+    [9, 7, 4, 9, 11, 7, 9, 1, 11, 2, 11, 1, 0, 8, 3, -1],
+    [11, 7, 4, 11, 4, 2, 2, 4, 0, -1, -1, -1, -1, -1, -1, -1],
+    [11, 7, 4, 11, 4, 2, 8, 3, 4, 3, 2, 4, -1, -1, -1, -1],
+    [2, 9, 10, 2, 7, 9, 2, 3, 7, 7, 4, 9, -1, -1, -1, -1],
+    [9, 10, 7, 9, 7, 4, 10, 2, 7, 8, 7, 0, 2, 0, 7, -1],
+    [3, 7, 10, 3, 10, 2, 7, 4, 10, 1, 10, 0, 4, 0, 10, -1],
+    [1, 10, 2, 8, 7, 4, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 9, 1, 4, 1, 7, 7, 1, 3, -1, -1, -1, -1, -1, -1, -1],
+    [4, 9, 1, 4, 1, 7, 0, 8, 1, 8, 7, 1, -1, -1, -1, -1],
+    [4, 0, 3, 7, 4, 3, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [4, 8, 7, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [9, 10, 8, 10, 11, 8, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [3, 0, 9, 3, 9, 11, 11, 9, 10, -1, -1, -1, -1, -1, -1, -1],
+    [0, 1, 10, 0, 10, 8, 8, 10, 11, -1, -1, -1, -1, -1, -1, -1],
+    [3, 1, 10, 11, 3, 10, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 2, 11, 1, 11, 9, 9, 11, 8, -1, -1, -1, -1, -1, -1, -1],
+    [3, 0, 9, 3, 9, 11, 1, 2, 9, 2, 11, 9, -1, -1, -1, -1],
+    [0, 2, 11, 8, 0, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [3, 2, 11, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [2, 3, 8, 2, 8, 10, 10, 8, 9, -1, -1, -1, -1, -1, -1, -1],
+    [9, 10, 2, 0, 9, 2, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [2, 3, 8, 2, 8, 10, 0, 1, 8, 1, 10, 8, -1, -1, -1, -1],
+    [1, 10, 2, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [1, 3, 8, 9, 1, 8, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 9, 1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [0, 3, 8, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+    [-1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1, -1],
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashMap;
+    use std::f64::consts::PI;
+
+    /// Samples `f` on `[lo, hi]^3` at `n^3`, exactly as the module places samples.
+    fn sample(n: usize, lo: f32, hi: f32, f: impl Fn([f32; 3]) -> f32) -> Vec<f32> {
+        let c = |i: usize| lo + (hi - lo) * (i as f32) / ((n - 1) as f32);
+        let mut v = Vec::with_capacity(n * n * n);
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    v.push(f([c(i), c(j), c(k)]));
+                }
+            }
+        }
+        v
+    }
+
+    fn extract(n: usize, values: &[f32], level: f32) -> Mesh {
+        let grid = Grid {
+            res: [n; 3],
+            min: [-1.0; 3],
+            max: [1.0; 3],
+            values,
+        };
+        marching_cubes(&grid, level)
+    }
+
+    fn sphere(p: [f32; 3]) -> f32 {
+        (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - 0.7
+    }
+
+    fn torus(p: [f32; 3]) -> f32 {
+        let q = (p[0] * p[0] + p[1] * p[1]).sqrt() - 0.5;
+        (q * q + p[2] * p[2]).sqrt() - 0.2
+    }
+
+    /// Asserts every undirected edge is used by exactly two triangles, in opposite
+    /// directions. Returns the number of undirected edges.
+    fn assert_watertight_oriented(m: &Mesh) -> usize {
+        let mut undirected: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in &m.triangles {
+            assert!(
+                t[0] != t[1] && t[1] != t[2] && t[0] != t[2],
+                "degenerate ids {t:?}"
+            );
+            for e in 0..3 {
+                let (a, b) = (t[e], t[(e + 1) % 3]);
+                *undirected.entry((a.min(b), a.max(b))).or_default() += 1;
+                *directed.entry((a, b)).or_default() += 1;
+            }
+        }
+        for (e, c) in &undirected {
+            assert_eq!(*c, 2, "edge {e:?} shared by {c} triangles");
+        }
+        for (e, c) in &directed {
+            assert_eq!(*c, 1, "directed edge {e:?} appears {c} times");
+        }
+        // No unused vertices either.
+        let mut used = vec![false; m.vertices.len()];
+        m.triangles
+            .iter()
+            .flatten()
+            .for_each(|&i| used[i as usize] = true);
+        assert!(used.iter().all(|u| *u), "unreferenced vertex");
+        undirected.len()
+    }
+
+    fn euler(m: &Mesh, edges: usize) -> i64 {
+        m.vertices.len() as i64 - edges as i64 + m.triangles.len() as i64
+    }
+
+    fn rel_err(got: f64, want: f64) -> f64 {
+        (got - want).abs() / want.abs()
+    }
+
+    #[test]
+    fn tables_are_consistent() {
+        for case in 0..256usize {
+            // Edge table: an edge is crossed iff its corners are on different sides.
+            let mut expect = 0u16;
+            for (e, &(a, b, _)) in EDGE_CORNERS.iter().enumerate() {
+                if ((case >> a) & 1) != ((case >> b) & 1) {
+                    expect |= 1 << e;
+                }
+            }
+            assert_eq!(EDGE_TABLE[case], expect, "EDGE_TABLE[{case}]");
+
+            // Triangle table: -1 terminated, multiple of 3, uses exactly the crossed
+            // edges.
+            let row = &TRI_TABLE[case];
+            let len = row.iter().position(|&x| x < 0).unwrap_or(16);
+            assert!(len % 3 == 0 && len <= 15, "TRI_TABLE[{case}] length {len}");
+            assert!(
+                row[len..].iter().all(|&x| x == -1),
+                "TRI_TABLE[{case}] tail"
+            );
+            let mut used = 0u16;
+            for &e in &row[..len] {
+                assert!((0..12).contains(&e), "TRI_TABLE[{case}] bad edge {e}");
+                used |= 1 << e;
+            }
+            assert_eq!(used, expect, "TRI_TABLE[{case}] edges");
+
+            // Within the cube, the triangles form an oriented surface whose boundary
+            // runs along cube faces, and each triangle faces away from the inside.
+            let mid = |e: i8| {
+                let (a, b, _) = EDGE_CORNERS[e as usize];
+                let (pa, pb) = (CORNER_OFFSET[a], CORNER_OFFSET[b]);
+                std::array::from_fn::<f64, 3, _>(|d| (pa[d] + pb[d]) as f64 * 0.5)
+            };
+            let mut directed: HashMap<(i8, i8), i32> = HashMap::new();
+            for t in row[..len].chunks(3) {
+                // Orientation as emitted by marching_cubes (reversed classic order).
+                let tri = [t[0], t[2], t[1]];
+                let n = cross64(
+                    sub64(mid(tri[1]), mid(tri[0])),
+                    sub64(mid(tri[2]), mid(tri[0])),
+                );
+                let mut s = 0.0;
+                for &e in &tri {
+                    let (a, b, _) = EDGE_CORNERS[e as usize];
+                    let (inside, outside) = if (case >> a) & 1 == 1 { (a, b) } else { (b, a) };
+                    let d: [f64; 3] = std::array::from_fn(|x| {
+                        CORNER_OFFSET[outside][x] as f64 - CORNER_OFFSET[inside][x] as f64
+                    });
+                    s += dot64(n, d);
+                }
+                assert!(s > 0.0, "TRI_TABLE[{case}] triangle {t:?} faces inward");
+                for i in 0..3 {
+                    *directed.entry((tri[i], tri[(i + 1) % 3])).or_default() += 1;
+                }
+            }
+            for (&(a, b), &c) in &directed {
+                assert_eq!(c, 1, "case {case}: directed edge {a}->{b} twice");
+                if directed.contains_key(&(b, a)) {
+                    continue;
+                }
+                // Boundary edge: both points must lie on one cube face.
+                let (pa, pb) = (mid(a), mid(b));
+                let on_face = (0..3).any(|d| pa[d] == pb[d] && (pa[d] == 0.0 || pa[d] == 1.0));
+                assert!(
+                    on_face,
+                    "case {case}: boundary edge {a}-{b} crosses the cube"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn sphere_accuracy_and_topology() {
+        let n = 96;
+        let values = sample(n, -1.0, 1.0, sphere);
+        let m = extract(n, &values, 0.0);
+        let r = 0.7f64;
+        assert!(!m.triangles.is_empty());
+        assert_eq!(m.vertices.len(), m.normals.len());
+
+        let area = m.area();
+        let vol = m.volume();
+        assert!(rel_err(area, 4.0 * PI * r * r) < 0.02, "area {area}");
+        assert!(
+            rel_err(vol, 4.0 / 3.0 * PI * r * r * r) < 0.02,
+            "volume {vol}"
+        );
+
+        let cos5 = 5f64.to_radians().cos();
+        for (p, nrm) in m.vertices.iter().zip(&m.normals) {
+            let p = p.map(f64::from);
+            let len = norm64(p);
+            assert!((len - r).abs() < 0.01, "vertex {p:?} at radius {len}");
+            let nrm = nrm.map(f64::from);
+            assert!((norm64(nrm) - 1.0).abs() < 1e-5, "normal not unit: {nrm:?}");
+            assert!(
+                dot64(nrm, p) / len > cos5,
+                "normal {nrm:?} not radial at {p:?}"
+            );
+        }
+        let edges = assert_watertight_oriented(&m);
+        assert_eq!(euler(&m, edges), 2, "sphere Euler characteristic");
+    }
+
+    #[test]
+    fn box_volume() {
+        let (a, b, c) = (0.5f32, 0.3f32, 0.4f32);
+        let n = 81;
+        let values = sample(n, -1.0, 1.0, |p| {
+            (p[0].abs() - a).max(p[1].abs() - b).max(p[2].abs() - c)
+        });
+        let m = extract(n, &values, 0.0);
+        let want = 8.0 * (a * b * c) as f64;
+        let vol = m.volume();
+        assert!(rel_err(vol, want) < 0.02, "box volume {vol} vs {want}");
+        let want_area = 8.0 * (a * b + b * c + a * c) as f64;
+        assert!(rel_err(m.area(), want_area) < 0.02, "box area {}", m.area());
+        assert_watertight_oriented(&m);
+    }
+
+    #[test]
+    fn torus_volume_and_topology() {
+        let n = 96;
+        let values = sample(n, -1.0, 1.0, torus);
+        let m = extract(n, &values, 0.0);
+        let want = 2.0 * PI * PI * 0.5 * 0.2 * 0.2;
+        let vol = m.volume();
+        assert!(rel_err(vol, want) < 0.02, "torus volume {vol} vs {want}");
+        let edges = assert_watertight_oriented(&m);
+        assert_eq!(euler(&m, edges), 0, "torus Euler characteristic");
+    }
+
+    #[test]
+    fn nonzero_level_and_anisotropic_grid() {
+        // Sphere of radius 0.5 as the 0.2-level of |p| - 0.3, on a non-cubic grid
+        // with different spacing per axis.
+        let res = [40usize, 57, 33];
+        let (min, max) = ([-0.9f32, -0.8, -0.7], [0.8f32, 0.9, 0.75]);
+        let mut values = Vec::new();
+        for k in 0..res[2] {
+            for j in 0..res[1] {
+                for i in 0..res[0] {
+                    let p: [f32; 3] = std::array::from_fn(|d| {
+                        let idx = [i, j, k][d];
+                        min[d] + (max[d] - min[d]) * idx as f32 / (res[d] - 1) as f32
+                    });
+                    values.push((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() - 0.3);
+                }
+            }
+        }
+        let m = marching_cubes(
+            &Grid {
+                res,
+                min,
+                max,
+                values: &values,
+            },
+            0.2,
+        );
+        let want = 4.0 / 3.0 * PI * 0.125;
+        assert!(rel_err(m.volume(), want) < 0.03, "volume {}", m.volume());
+        for (p, nrm) in m.vertices.iter().zip(&m.normals) {
+            let p = p.map(f64::from);
+            assert!(dot64(nrm.map(f64::from), p) / norm64(p) > 0.98);
+        }
+        assert_watertight_oriented(&m);
+
+        // Mirroring the x axis (max < min) must keep the outward orientation.
+        let mut mirrored = values.clone();
+        for k in 0..res[2] {
+            for j in 0..res[1] {
+                let row = &mut mirrored[(j + res[1] * k) * res[0]..][..res[0]];
+                row.reverse();
+            }
+        }
+        let m2 = marching_cubes(
+            &Grid {
+                res,
+                min: [0.9, min[1], min[2]],
+                max: [-0.8, max[1], max[2]],
+                values: &mirrored,
+            },
+            0.2,
+        );
+        assert!(
+            rel_err(m2.volume(), m.volume()) < 1e-4,
+            "{} vs {}",
+            m2.volume(),
+            m.volume()
+        );
+        assert_watertight_oriented(&m2);
+    }
+
+    /// Small deterministic PRNG (xorshift64*).
+    struct Rng(u64);
+    impl Rng {
+        fn next_f32(&mut self) -> f32 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            let x = self.0.wrapping_mul(0x2545_f491_4f6c_dd1d);
+            (x >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        }
+    }
+
+    #[test]
+    fn random_fields_are_watertight() {
+        // Random values exercise every case, including all ambiguous faces; a
+        // positive border makes every component closed.
+        let n = 14;
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let mut seen = [false; 256];
+        for round in 0..40 {
+            let mut values = vec![1.0f32; n * n * n];
+            for k in 1..n - 1 {
+                for j in 1..n - 1 {
+                    for i in 1..n - 1 {
+                        let mut v = rng.next_f32();
+                        // Some samples exactly on the level.
+                        if round % 4 == 3 && v.abs() < 0.1 {
+                            v = 0.0;
+                        }
+                        values[i + n * (j + n * k)] = v;
+                    }
+                }
+            }
+            for k in 0..n - 1 {
+                for j in 0..n - 1 {
+                    for i in 0..n - 1 {
+                        let mut case = 0;
+                        for (c, o) in CORNER_OFFSET.iter().enumerate() {
+                            let v = values[i + o[0] + n * (j + o[1] + n * (k + o[2]))];
+                            case |= usize::from(v < 0.0) << c;
+                        }
+                        seen[case] = true;
+                    }
+                }
+            }
+            let m = extract(n, &values, 0.0);
+            assert_watertight_oriented(&m);
+            assert!(m.volume() > 0.0);
+            assert!(m.normals.iter().all(|v| v.iter().all(|x| x.is_finite())));
+        }
+        assert!(seen.iter().all(|s| *s), "not all 256 cases exercised");
+    }
+
+    #[test]
+    fn empty_and_degenerate_inputs() {
+        let n = 8;
+        let values = vec![1.0f32; n * n * n];
+        let m = extract(n, &values, 0.0);
+        assert!(m.vertices.is_empty() && m.normals.is_empty() && m.triangles.is_empty());
+        assert_eq!(m.area(), 0.0);
+        assert_eq!(m.volume(), 0.0);
+
+        // All inside: also empty.
+        let m = extract(n, &vec![-1.0f32; n * n * n], 0.0);
+        assert!(m.triangles.is_empty());
+
+        // Too few samples along an axis.
+        let v = [0.0f32, -1.0, 1.0, 0.5];
+        let g = Grid {
+            res: [4, 1, 1],
+            min: [0.0; 3],
+            max: [1.0; 3],
+            values: &v,
+        };
+        assert!(marching_cubes(&g, 0.0).triangles.is_empty());
+        let g = Grid {
+            res: [0, 0, 0],
+            min: [0.0; 3],
+            max: [1.0; 3],
+            values: &[],
+        };
+        assert!(marching_cubes(&g, 0.0).triangles.is_empty());
+
+        // NaN level.
+        let values = sample(16, -1.0, 1.0, sphere);
+        assert!(extract(16, &values, f32::NAN).triangles.is_empty());
+    }
+
+    #[test]
+    #[should_panic(expected = "values.len()")]
+    fn wrong_value_count_panics() {
+        let v = vec![0.0f32; 7];
+        marching_cubes(
+            &Grid {
+                res: [2, 2, 2],
+                min: [0.0; 3],
+                max: [1.0; 3],
+                values: &v,
+            },
+            0.0,
+        );
+    }
+
+    #[test]
+    fn nan_region_does_not_panic() {
+        let n = 48;
+        let mut values = sample(n, -1.0, 1.0, sphere);
+        let c = |i: usize| -1.0 + 2.0 * i as f32 / (n - 1) as f32;
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    if c(i) > 0.2 && c(k) < 0.1 {
+                        values[i + n * (j + n * k)] = f32::NAN;
+                    }
+                }
+            }
+        }
+        // A corner block of NaN, an all-NaN grid, and isolated NaNs.
+        let m = extract(n, &values, 0.0);
+        assert!(!m.triangles.is_empty());
+        for (p, nrm) in m.vertices.iter().zip(&m.normals) {
+            assert!(p.iter().all(|x| x.is_finite()));
+            assert!(nrm.iter().all(|x| x.is_finite()));
+            let l = (nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]).sqrt();
+            assert!((l - 1.0).abs() < 1e-4, "normal {nrm:?}");
+        }
+        assert!(
+            extract(n, &vec![f32::NAN; n * n * n], 0.0)
+                .triangles
+                .is_empty()
+        );
+        let mut values = sample(n, -1.0, 1.0, sphere);
+        for i in (0..values.len()).step_by(97) {
+            values[i] = f32::NAN;
+        }
+        let m = extract(n, &values, 0.0);
+        assert!(m.normals.iter().flatten().all(|x| x.is_finite()));
+    }
+
+    #[test]
+    fn single_cube_orientation_and_normal_fallback() {
+        // One inside corner at the origin: one triangle facing away from it.
+        let v = [-1.0f32, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+        let g = Grid {
+            res: [2, 2, 2],
+            min: [0.0; 3],
+            max: [1.0; 3],
+            values: &v,
+        };
+        let m = marching_cubes(&g, 0.0);
+        assert_eq!(m.triangles.len(), 1);
+        let [a, b, c] = m.triangles[0].map(|i| m.vertices[i as usize].map(f64::from));
+        let face = cross64(sub64(b, a), sub64(c, a));
+        assert!(face.iter().all(|x| *x > 0.0), "face normal {face:?}");
+        for n in &m.normals {
+            assert!(n.iter().all(|x| *x > 0.0), "normal {n:?}");
+        }
+
+        // Bottom layer inside, top outside, but a flat box (min z == max z): the
+        // gradient is not computable, so normals come from the faces (+z).
+        let v = [-1.0f32, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0];
+        let g = Grid {
+            res: [2, 2, 2],
+            min: [0.0; 3],
+            max: [1.0, 1.0, 0.0],
+            values: &v,
+        };
+        let m = marching_cubes(&g, 0.0);
+        assert_eq!(m.triangles.len(), 2);
+        for n in &m.normals {
+            assert!(
+                (n[2] - 1.0).abs() < 1e-6 && n[0] == 0.0 && n[1] == 0.0,
+                "normal {n:?}"
+            );
+        }
+    }
+
+    fn parse_ply_header(bytes: &[u8]) -> (Vec<String>, usize) {
+        let marker = b"end_header\n";
+        let end = bytes
+            .windows(marker.len())
+            .position(|w| w == marker)
+            .expect("no end_header")
+            + marker.len();
+        let text = std::str::from_utf8(&bytes[..end]).expect("header not ascii");
+        (text.lines().map(str::to_owned).collect(), end)
+    }
+
+    #[test]
+    fn ply_round_trip() {
+        let n = 24;
+        let values = sample(n, -1.0, 1.0, sphere);
+        let m = extract(n, &values, 0.0);
+        let colors: Vec<[u8; 3]> = (0..m.vertices.len())
+            .map(|i| [i as u8, (i * 7) as u8, 200])
+            .collect();
+        let mut out = Vec::new();
+        m.write_ply(&mut out, &colors).unwrap();
+
+        let (lines, body_start) = parse_ply_header(&out);
+        assert_eq!(lines[0], "ply");
+        assert_eq!(lines[1], "format binary_little_endian 1.0");
+        let count = |name: &str| -> usize {
+            let prefix = format!("element {name} ");
+            lines
+                .iter()
+                .find_map(|l| l.strip_prefix(&prefix))
+                .unwrap()
+                .parse()
+                .unwrap()
+        };
+        let (nv, nf) = (count("vertex"), count("face"));
+        assert_eq!(nv, m.vertices.len());
+        assert_eq!(nf, m.triangles.len());
+        let props: Vec<&str> = lines
+            .iter()
+            .filter_map(|l| l.strip_prefix("property "))
+            .collect();
+        assert_eq!(
+            props,
+            [
+                "float x",
+                "float y",
+                "float z",
+                "float nx",
+                "float ny",
+                "float nz",
+                "uchar red",
+                "uchar green",
+                "uchar blue",
+                "list uchar int vertex_indices"
+            ]
+        );
+        assert_eq!(lines.last().unwrap(), "end_header");
+
+        let body = &out[body_start..];
+        let vsize = 6 * 4 + 3;
+        assert_eq!(body.len(), nv * vsize + nf * (1 + 3 * 4));
+
+        // Decode and compare everything.
+        let f = |o: usize| f32::from_le_bytes(body[o..o + 4].try_into().unwrap());
+        for (i, ((p, n), col)) in m.vertices.iter().zip(&m.normals).zip(&colors).enumerate() {
+            let o = i * vsize;
+            assert_eq!([f(o), f(o + 4), f(o + 8)], *p);
+            assert_eq!([f(o + 12), f(o + 16), f(o + 20)], *n);
+            assert_eq!(body[o + 24..o + 27], *col);
+        }
+        for (t, chunk) in m.triangles.iter().zip(body[nv * vsize..].chunks(13)) {
+            assert_eq!(chunk[0], 3);
+            let idx: Vec<u32> = chunk[1..]
+                .chunks(4)
+                .map(|c| i32::from_le_bytes(c.try_into().unwrap()) as u32)
+                .collect();
+            assert_eq!(idx, t);
+        }
+
+        // Empty mesh writes a valid header and nothing else.
+        let mut out = Vec::new();
+        Mesh::default().write_ply(&mut out, &[]).unwrap();
+        let (lines, body_start) = parse_ply_header(&out);
+        assert!(lines.contains(&"element vertex 0".to_owned()));
+        assert!(lines.contains(&"element face 0".to_owned()));
+        assert_eq!(out.len(), body_start);
+    }
+
+    #[test]
+    fn ply_rejects_bad_input() {
+        let values = sample(12, -1.0, 1.0, sphere);
+        let m = extract(12, &values, 0.0);
+        let mut out = Vec::new();
+        let colors = vec![[0u8; 3]; m.vertices.len() - 1];
+        let err = m.write_ply(&mut out, &colors).unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::InvalidInput);
+        assert!(out.is_empty(), "nothing written on error");
+
+        let mut bad = m.clone();
+        bad.triangles.push([0, 1, bad.vertices.len() as u32]);
+        let colors = vec![[0u8; 3]; m.vertices.len()];
+        assert_eq!(
+            bad.write_ply(&mut out, &colors).unwrap_err().kind(),
+            io::ErrorKind::InvalidInput
+        );
+        let mut bad = m.clone();
+        bad.normals.pop();
+        assert_eq!(
+            bad.write_ply(&mut out, &colors).unwrap_err().kind(),
+            io::ErrorKind::InvalidInput
+        );
+    }
+
+    #[test]
+    fn area_and_volume_of_a_tetrahedron() {
+        let m = Mesh {
+            vertices: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
+            normals: vec![[0.0; 3]; 4],
+            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        };
+        assert!((m.volume() - 1.0 / 6.0).abs() < 1e-12);
+        assert!((m.area() - (1.5 + 3f64.sqrt() / 2.0)).abs() < 1e-12);
+    }
+
+    /// `cargo test --release -- --ignored --nocapture timing_256`
+    #[test]
+    #[ignore]
+    fn timing_256() {
+        let n = 256;
+        let values = sample(n, -1.0, 1.0, sphere);
+        let grid = Grid {
+            res: [n; 3],
+            min: [-1.0; 3],
+            max: [1.0; 3],
+            values: &values,
+        };
+        let _ = marching_cubes(&grid, 0.0); // warm-up
+        let runs = 5;
+        let mut best = f64::INFINITY;
+        let mut m = Mesh::default();
+        for _ in 0..runs {
+            let t = std::time::Instant::now();
+            m = marching_cubes(&grid, 0.0);
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        println!(
+            "256^3 sphere: {} vertices, {} triangles, best of {runs}: {:.1} ms",
+            m.vertices.len(),
+            m.triangles.len(),
+            best * 1e3
+        );
+        let empty = vec![1.0f32; n * n * n];
+        let t = std::time::Instant::now();
+        let e = marching_cubes(
+            &Grid {
+                values: &empty,
+                ..grid
+            },
+            0.0,
+        );
+        println!(
+            "256^3 empty field: {:.1} ms",
+            t.elapsed().as_secs_f64() * 1e3
+        );
+        assert!(e.triangles.is_empty());
+    }
+}
