@@ -4,11 +4,14 @@
 //!
 //! - [`siren`]: SIREN + INS, stylizing a 2D image through its implicit representation.
 //! - [`nerf`]: NeRF + INS, stylized radiance fields from posed photos.
+//! - [`idr`]: IDR + INS, stylized implicit surfaces from masked multi-view photos.
 //! - [`image_task`]: the image-fitting and stylization task any coordinate → RGB model uses
 //!   (SIREN, or a user's own content module).
 
 pub mod config;
 pub mod demo;
+pub mod idr;
 pub mod image_task;
 pub mod nerf;
 pub mod siren;
+pub mod style_mix;

@@ -302,18 +302,7 @@ impl SirenRun {
 
     /// Renders at `w`×`h` with a style mix (normalised to sum 1).
     pub fn render(&self, w: usize, h: usize, mix: &[f32], device: &Device) -> Result<RgbImage> {
-        let n = self.model.n_styles();
-        if mix.len() != n {
-            bail!("--mix has {} weights but the run has {n} styles", mix.len());
-        }
-        if mix.iter().any(|v| !v.is_finite() || *v < 0.0) {
-            bail!("--mix weights must be non-negative numbers");
-        }
-        let sum: f32 = mix.iter().sum();
-        if sum <= 0.0 {
-            bail!("--mix weights sum to 0");
-        }
-        let code: Vec<f32> = mix.iter().map(|v| v / sum).collect();
+        let code = crate::style_mix::normalized(self.model.n_styles(), Some(mix))?;
         render_image(&self.model, w, h, &code, device)
     }
 

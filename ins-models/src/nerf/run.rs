@@ -267,29 +267,7 @@ impl NerfRun {
 
     /// A style code `[1, n]` from mix weights (normalised), or `None` for an unstylized run.
     pub fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
-        let n = self.model.n_styles();
-        if n == 0 {
-            if mix.is_some() {
-                bail!("--mix: {} is not a stylized run", self.dir.display());
-            }
-            return Ok(None);
-        }
-        let mix: Vec<f32> = match mix {
-            Some(m) => m.to_vec(),
-            None => (0..n).map(|i| if i == 0 { 1.0 } else { 0.0 }).collect(),
-        };
-        if mix.len() != n {
-            bail!("--mix has {} weights but the run has {n} styles", mix.len());
-        }
-        if mix.iter().any(|v| !v.is_finite() || *v < 0.0) {
-            bail!("--mix weights must be non-negative numbers");
-        }
-        let sum: f32 = mix.iter().sum();
-        if sum <= 0.0 {
-            bail!("--mix weights sum to 0");
-        }
-        let code: Vec<f32> = mix.iter().map(|v| v / sum).collect();
-        Ok(Some(Tensor::<1>::from_floats(code.as_slice(), device).reshape([1, n])))
+        crate::style_mix::code(self.model.n_styles(), mix, &self.dir, device)
     }
 }
 

@@ -1,0 +1,150 @@
+//! The configuration of an IDR run: `ins-cli train idr` flags and the run's `config.json`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+use serde::{Deserialize, Serialize};
+
+use super::model::{IdrArch, SdfKind};
+
+/// Everything that defines an IDR run, pretraining (`--scene`) or stylization (`--from`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
+#[serde(default, deny_unknown_fields)]
+pub struct IdrRunConfig {
+    /// DTU/IDR scene folder (cameras.npz, image/, mask/) to pretrain on.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Pretrained IDR run to stylize.
+    #[arg(long)]
+    pub from: Option<PathBuf>,
+    /// Style image; repeat for a conditional multi-style model (stylization only).
+    #[arg(long = "style")]
+    pub styles: Vec<PathBuf>,
+    /// SDF network: grid (fast, default) or mlp (IDR's 8×512).
+    #[arg(long, default_value = "grid")]
+    pub sdf: SdfKind,
+    /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
+    #[arg(long, default_value_t = 0)]
+    pub downscale: u32,
+    /// Hold out every K-th view for evaluation (0: train on all views).
+    #[arg(long, default_value_t = 0)]
+    pub holdout: usize,
+    /// Train without masks (every pixel counts as the object; no mask loss): a weaker result.
+    #[arg(long)]
+    pub no_mask: bool,
+    /// Training steps (0: 3000 pretraining, 400 stylizing).
+    #[arg(long, default_value_t = 0)]
+    pub steps: usize,
+    /// Rays per pretraining step.
+    #[arg(long, default_value_t = 2048)]
+    pub rays: usize,
+    /// Adam learning rate (0: 5e-3 grid / 1e-4 mlp pretraining, 1e-3 stylizing).
+    #[arg(long, default_value_t = 0.0)]
+    pub lr: f64,
+    /// Radius of the initial sphere.
+    #[arg(long, default_value_t = 0.6)]
+    pub init_radius: f64,
+    /// Weight of the mask loss (IDR: 100).
+    #[arg(long, default_value_t = 100.0)]
+    pub mask_weight: f64,
+    /// Weight of the eikonal loss (IDR: 0.1).
+    #[arg(long, default_value_t = 0.1)]
+    pub eikonal_weight: f64,
+    /// Steps between evaluations on held-out views (0: only at the end).
+    #[arg(long, default_value_t = 500)]
+    pub eval_every: usize,
+    /// Stylization: rays per patch side.
+    #[arg(long, default_value_t = 64)]
+    pub patch: usize,
+    /// Stylization: pixels between patch rays (0: the window spans about half the image).
+    #[arg(long, default_value_t = 0)]
+    pub stride: usize,
+    /// Stylization: longer side of the style images for their Gram targets.
+    #[arg(long, default_value_t = 256)]
+    pub style_size: usize,
+    /// Stylization: style loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    pub style_weight: Option<f64>,
+    /// Stylization: content loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    pub content_weight: Option<f64>,
+    /// Stylization: SDF learning rate as a fraction of the others' (the paper: 1e-11, in
+    /// effect frozen; 0 freezes the surface outright).
+    #[arg(long, default_value_t = 0.0)]
+    pub sdf_lr_ratio: f64,
+    /// Stylization: SIM width.
+    #[arg(long, default_value_t = 64)]
+    pub sim_width: usize,
+    /// Stylization: octaves of the position encoding fed to the SIM.
+    #[arg(long, default_value_t = 4)]
+    pub position_freqs: usize,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Steps between checkpoints.
+    #[arg(long, default_value_t = 500)]
+    pub checkpoint_every: usize,
+}
+
+impl Default for IdrRunConfig {
+    fn default() -> Self {
+        crate::config::clap_defaults()
+    }
+}
+
+/// Pretraining or stylizing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IdrKind {
+    /// `--scene`.
+    Pretrain,
+    /// `--from`.
+    Stylize,
+}
+
+impl IdrRunConfig {
+    /// Reads a run's `config.json`.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        crate::config::read_json(path)
+    }
+
+    /// Which kind of run this is.
+    pub fn kind(&self) -> Result<IdrKind> {
+        match (&self.scene, &self.from) {
+            (Some(_), None) if self.styles.is_empty() => Ok(IdrKind::Pretrain),
+            (Some(_), None) => bail!("--style needs --from RUN (stylize a pretrained IDR run); pretrain with --scene first"),
+            (None, Some(_)) if !self.styles.is_empty() => Ok(IdrKind::Stylize),
+            (None, Some(_)) => bail!("stylizing (--from) needs at least one --style image"),
+            (Some(_), Some(_)) => bail!("give either --scene (pretrain) or --from (stylize), not both"),
+            (None, None) => bail!("give --scene DIR to pretrain a surface, or --from RUN --style IMG to stylize one"),
+        }
+    }
+
+    /// The model sizes.
+    pub fn arch(&self) -> IdrArch {
+        IdrArch {
+            sdf: self.sdf,
+            radius: self.init_radius,
+        }
+    }
+
+    /// Steps to run.
+    pub fn steps_for(&self, kind: IdrKind) -> usize {
+        match (self.steps, kind) {
+            (0, IdrKind::Pretrain) => 3000,
+            (0, IdrKind::Stylize) => 400,
+            (n, _) => n,
+        }
+    }
+
+    /// Learning rate.
+    pub fn lr_for(&self, kind: IdrKind) -> f64 {
+        if self.lr > 0.0 {
+            return self.lr;
+        }
+        match (kind, self.sdf) {
+            (IdrKind::Pretrain, SdfKind::Grid) => 5e-3,
+            (IdrKind::Pretrain, SdfKind::Mlp) => 1e-4,
+            (IdrKind::Stylize, _) => 1e-3,
+        }
+    }
+}

@@ -1,0 +1,21 @@
+//! IDR + INS: stylized implicit surfaces. A signed distance field and a rendering network are
+//! learned from masked multi-view photos (DTU) with IDR's losses; stylization then trains SIM +
+//! AM inside the rendering network with VGG losses on strided patches inside the mask, the
+//! surface kept (its learning rate scaled down, by default frozen).
+//!
+//! - [`model`]: SDF network (IDR MLP or hash grid), rendering network, SIM and AM.
+//! - [`render`]: sphere tracing and IDR's differentiable surface point.
+//! - [`task`]: the losses; [`run`]: pretraining, stylizing, loading runs.
+//! - [`eval`]: silhouette IoU and PSNR inside the mask; [`mesh`]: marching-cubes export.
+
+pub mod config;
+pub mod eval;
+pub mod mesh;
+pub mod model;
+pub mod render;
+pub mod run;
+pub mod task;
+
+pub use config::IdrRunConfig;
+pub use model::IdrModel;
+pub use run::{IdrRun, pretrain, stylize};

@@ -1,0 +1,164 @@
+//! IDR + INS: an SDF network (the CIM: IDR's MLP or a hash grid), IDR's rendering network,
+//! and, once stylization starts, a SIM (style code + encoded position → style features) and an
+//! AM that fuses them into the SDF features the rendering network sees.
+
+use burn::prelude::*;
+use ins_core::modules::encoding::FourierEncoding;
+use ins_core::modules::hash_grid::HashGridConfig;
+use ins_core::modules::radiance_am::FeatureBlend;
+use ins_core::modules::sdf::{SdfGridConfig, SdfMlpConfig, SdfNet};
+use ins_core::modules::sim::{Sim, SimConfig};
+use ins_core::modules::surface_color::{SurfaceColor, SurfaceColorConfig};
+use ins_core::train::{GroupSpec, Optimizable};
+use serde::{Deserialize, Serialize};
+
+/// Which SDF network a run uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum SdfKind {
+    /// Hash grid + small MLPs (fast on a CPU).
+    #[default]
+    Grid,
+    /// IDR's 8×512 MLP (the paper's).
+    Mlp,
+}
+
+impl std::str::FromStr for SdfKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "grid" => Ok(Self::Grid),
+            "mlp" | "idr" => Ok(Self::Mlp),
+            _ => Err(format!("unknown --sdf {s:?} (expected grid or mlp)")),
+        }
+    }
+}
+
+impl std::fmt::Display for SdfKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Grid => "grid",
+            Self::Mlp => "mlp",
+        })
+    }
+}
+
+/// SIM and feature AM.
+#[derive(Module, Debug)]
+pub struct SurfaceStylizer {
+    /// Style code (+ encoded position) → style features.
+    pub sim: Sim,
+    /// Fuses them into the SDF features (γ starts at 1: identity).
+    pub am: FeatureBlend,
+    /// Octaves of the position encoding the SIM sees.
+    pub position_freqs: usize,
+}
+
+/// The model of an IDR run.
+#[derive(Module, Debug)]
+pub struct IdrModel {
+    /// Signed distance and features.
+    pub sdf: SdfNet,
+    /// Surface colour.
+    pub color: SurfaceColor,
+    /// SIM + AM (stylization runs only).
+    pub stylizer: Option<SurfaceStylizer>,
+}
+
+const PLAIN: &[GroupSpec] = &[GroupSpec::new("sdf", &["sdf"]), GroupSpec::new("color", &["color"])];
+const STYLIZED: &[GroupSpec] = &[
+    GroupSpec::new("sdf", &["sdf"]),
+    GroupSpec::new("color", &["color"]),
+    GroupSpec::new("sim", &["stylizer.sim"]),
+    GroupSpec::new("am", &["stylizer.am"]),
+];
+
+impl Optimizable for IdrModel {
+    fn groups(&self) -> &'static [GroupSpec] {
+        if self.stylizer.is_some() { STYLIZED } else { PLAIN }
+    }
+}
+
+/// Sizes of an IDR model.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct IdrArch {
+    /// SDF network.
+    pub sdf: SdfKind,
+    /// Radius of the initial sphere.
+    pub radius: f64,
+}
+
+impl IdrModel {
+    /// A fresh model: the SDF starts as a sphere of radius `arch.radius` inside the unit sphere.
+    pub fn new(arch: &IdrArch, device: &Device) -> Self {
+        let (sdf, color) = match arch.sdf {
+            SdfKind::Mlp => {
+                let s = SdfMlpConfig::new().with_radius(arch.radius).init(device);
+                let net = SdfNet::Mlp(s);
+                let c = SurfaceColorConfig::new(net.d_features()).init(device);
+                (net, c)
+            }
+            SdfKind::Grid => {
+                let grid = HashGridConfig::new()
+                    .with_log2_table(17)
+                    .with_base_resolution(16)
+                    .with_max_resolution(1024);
+                let net = SdfNet::Grid(SdfGridConfig::new(grid).with_radius(arch.radius).init(1.0, device));
+                let c = SurfaceColorConfig::new(net.d_features())
+                    .with_d_hidden(64)
+                    .with_depth(2)
+                    .init(device);
+                (net, c)
+            }
+        };
+        Self {
+            sdf,
+            color,
+            stylizer: None,
+        }
+    }
+
+    /// Adds a fresh SIM and AM (identity) for `n_styles` styles.
+    pub fn with_stylizer(mut self, n_styles: usize, width: usize, position_freqs: usize, device: &Device) -> Self {
+        let d_pos = FourierEncoding::new(position_freqs).d_out(3);
+        let sim = SimConfig::new(n_styles)
+            .with_d_hidden(width)
+            .with_depth(4)
+            .with_code_every_layer(true)
+            .with_d_position(d_pos)
+            .init(device);
+        let am = FeatureBlend::new(self.sdf.d_features(), width, width, 2, device);
+        self.stylizer = Some(SurfaceStylizer {
+            sim,
+            am,
+            position_freqs,
+        });
+        self
+    }
+
+    /// Number of styles (0 without a stylizer).
+    pub fn n_styles(&self) -> usize {
+        self.stylizer
+            .as_ref()
+            .map_or(0, |s| s.sim.layers[0].weight.dims()[0])
+    }
+
+    /// Colour at surface points `x [N, 3]` with normals `n [N, 3]`, seen along unit `dirs`,
+    /// with SDF features `f [N, F]`, under each style code of `codes [S, n_styles]`: `[S, N, 3]`.
+    pub fn shade(&self, x: Tensor<2>, n: Tensor<2>, dirs: Tensor<2>, f: Tensor<2>, codes: Option<Tensor<2>>) -> Tensor<3> {
+        let [count, _] = x.dims();
+        let (Some(st), Some(codes)) = (&self.stylizer, codes) else {
+            return self.color.forward(x, n, dirs, f).reshape([1, count, 3]);
+        };
+        let [s, k] = codes.dims();
+        let rep = |t: Tensor<2>| -> Tensor<2> {
+            let w = t.dims()[1];
+            if s == 1 { t } else { t.unsqueeze_dim::<3>(0).expand([s, count, w]).reshape([s * count, w]) }
+        };
+        let pos = FourierEncoding::new(st.position_freqs).encode(x.clone());
+        let code_rows = codes.reshape([s, 1, k]).expand([s, count, k]).reshape([s * count, k]);
+        let style = st.sim.forward(code_rows, Some(rep(pos)));
+        let f = st.am.forward(rep(f), style);
+        self.color.forward(rep(x), rep(n), rep(dirs), f).reshape([s, count, 3])
+    }
+}

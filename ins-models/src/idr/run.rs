@@ -1,0 +1,263 @@
+//! IDR runs end to end: pretraining a surface on a masked multi-view scene, stylizing it, and
+//! loading a run folder back.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use burn::prelude::*;
+use ins_core::data::{LoadOptions, Scene, SceneFormat, Split, detect_format};
+use ins_core::imaging::RgbImage;
+use ins_core::loss::{LossWeights, StyleTarget};
+use ins_core::render::patches::PatchSpec;
+use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
+use ins_core::train::{LrSchedule, Phase, TrainOptions, TrainOutcome, Trainer};
+use vgg_import::Vgg;
+
+use super::config::{IdrKind, IdrRunConfig};
+use super::eval::{evaluate_views, save_pictures};
+use super::model::IdrModel;
+use super::task::{IdrObjective, IdrTask, SurfaceStylization};
+use crate::image_task::one_hot_codes;
+use crate::nerf::config::auto_downscale;
+
+/// Loads a DTU/IDR scene for surface reconstruction: the format must be DTU (unit-sphere frame
+/// and masks), masks must exist unless `no_mask`, and every `holdout`-th view goes to val.
+pub fn load_scene(path: &Path, downscale: u32, holdout: usize, no_mask: bool) -> Result<(Scene, u32)> {
+    let format = detect_format(path)?;
+    if format != SceneFormat::Dtu {
+        bail!(
+            "{}: IDR reconstructs surfaces from DTU/IDR scenes (cameras.npz with a unit-sphere scale_mat, image/, mask/); this is a {format} scene — train a NeRF on it instead (`ins-cli train nerf`)",
+            path.display()
+        );
+    }
+    let factor = if downscale == 0 {
+        let probe = Scene::load(path, &LoadOptions::default())?;
+        let (w, h) = probe.resolution();
+        auto_downscale(w, h, 512)
+    } else {
+        downscale
+    };
+    let mut scene = Scene::load(
+        path,
+        &LoadOptions {
+            downscale: factor,
+            ..Default::default()
+        },
+    )?;
+    if !no_mask && !scene.views.iter().all(|v| v.mask.is_some()) {
+        bail!(
+            "{}: IDR needs an object mask per view (mask/ folder); pass --no-mask to train without them (colour only on the whole image, a weaker surface)",
+            path.display()
+        );
+    }
+    if holdout > 0 {
+        let all: Vec<usize> = (0..scene.views.len()).collect();
+        scene.val = all.iter().copied().filter(|i| i % holdout == 0).collect();
+        scene.train = all.into_iter().filter(|i| i % holdout != 0).collect();
+    }
+    if scene.split(Split::Train).is_empty() {
+        bail!("{}: the scene has no training views", path.display());
+    }
+    Ok((scene, factor))
+}
+
+fn write_config(cfg: &IdrRunConfig, out: &Path, resume: bool) -> Result<()> {
+    let path = out.join("config.json");
+    if resume && path.exists() {
+        let saved = IdrRunConfig::from_file(&path)?;
+        if saved != *cfg {
+            bail!(
+                "{}: the run was started with another configuration; resume with the same options (or --config {})",
+                path.display(),
+                path.display()
+            );
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    ins_io::write_atomic(&path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
+    Ok(())
+}
+
+/// Pretrains a surface on `cfg.scene` into `opts.out_dir`.
+pub fn pretrain(cfg: &IdrRunConfig, device: &Device, opts: TrainOptions) -> Result<TrainOutcome<IdrModel>> {
+    let scene_path = cfg.scene.clone().context("pretraining needs --scene DIR")?;
+    let (scene, factor) = load_scene(&scene_path, cfg.downscale, cfg.holdout, cfg.no_mask)?;
+    let mut cfg = cfg.clone();
+    cfg.downscale = factor;
+    cfg.steps = cfg.steps_for(IdrKind::Pretrain);
+    cfg.lr = cfg.lr_for(IdrKind::Pretrain);
+    let out = opts.out_dir.clone();
+    write_config(&cfg, &out, opts.resume)?;
+    let ad = device.clone().autodiff();
+    let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || IdrModel::new(&cfg.arch(), &ad));
+    let views = scene.split(Split::Val).to_vec();
+    let mut task = IdrTask::new(
+        scene,
+        cfg.rays,
+        cfg.steps,
+        !cfg.no_mask,
+        None,
+        cfg.eval_every,
+        views,
+        out.join("val"),
+        &ad,
+    );
+    let mut phase = Phase::new("pretrain", IdrObjective::Pretrain, cfg.steps, cfg.lr)
+        .schedule(LrSchedule {
+            base: cfg.lr,
+            decay: 0.1,
+            decay_steps: cfg.steps as f64,
+        })
+        .weight("rgb", 1.0)
+        .weight("mse_mask", 0.0)
+        .weight("eikonal", cfg.eikonal_weight);
+    if !cfg.no_mask {
+        phase = phase.weight("mask", cfg.mask_weight);
+    }
+    let outcome = Trainer::new(vec![phase], opts).run(&mut task, model)?;
+    if outcome.finished {
+        final_pictures(&outcome.model, &task, &out, device)?;
+    }
+    Ok(outcome)
+}
+
+fn final_pictures(model: &IdrModel, task: &IdrTask, out: &Path, device: &Device) -> Result<()> {
+    let views: Vec<usize> = if task.eval_views.is_empty() {
+        task.scene.split(Split::Train).iter().copied().take(2).collect()
+    } else {
+        task.eval_views.iter().copied().take(6).collect()
+    };
+    let code = task.style.as_ref().map(|s| s.codes.clone().slice([0..1]).inner().to_device(device));
+    let evals = evaluate_views(&model.valid().to_device(device), &task.scene, &views, code, task.masked, &task.trace, device)?;
+    save_pictures(&evals, &out.join("val").join("final.png"))
+}
+
+/// A run folder loaded back.
+pub struct IdrRun {
+    /// The run folder.
+    pub dir: PathBuf,
+    /// Its configuration.
+    pub config: IdrRunConfig,
+    /// The pretrained run's configuration, for a stylized run.
+    pub base: Option<IdrRunConfig>,
+    /// The scene at the run's resolution, with the run's held-out views.
+    pub scene: Scene,
+    /// The model of the newest checkpoint.
+    pub model: IdrModel,
+}
+
+impl IdrRun {
+    /// Loads `dir` (written by `train idr`).
+    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
+        let config_path = dir.join("config.json");
+        if !config_path.is_file() {
+            bail!("{} is not an IDR run folder (no config.json)", dir.display());
+        }
+        let config = IdrRunConfig::from_file(&config_path).with_context(|| format!("{} is not an IDR run", dir.display()))?;
+        let base = match config.kind()? {
+            IdrKind::Pretrain => None,
+            IdrKind::Stylize => {
+                let from = config.from.clone().expect("kind checked");
+                Some(IdrRunConfig::from_file(&from.join("config.json")).with_context(|| format!("the base run of {}", dir.display()))?)
+            }
+        };
+        let scene_cfg = base.as_ref().unwrap_or(&config);
+        let scene_path = scene_cfg.scene.clone().context("the base run has no scene")?;
+        let (scene, _) = load_scene(&scene_path, scene_cfg.downscale, scene_cfg.holdout, scene_cfg.no_mask)?;
+        let store = CheckpointStore::new(dir.join("checkpoints"), 2);
+        let latest = store
+            .latest_dir()?
+            .with_context(|| format!("{}: no checkpoint in the run folder", dir.display()))?;
+        let ckpt = CheckpointStore::load_dir(&latest)?;
+        let mut model = IdrModel::new(&scene_cfg.arch(), device);
+        if base.is_some() {
+            model = model.with_stylizer(config.styles.len(), config.sim_width, config.position_freqs, device);
+        }
+        let model = load_module_bytes(model, ckpt.model, &latest.join("model.bpk"))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            config,
+            base,
+            scene,
+            model,
+        })
+    }
+
+    /// Whether masks were used.
+    pub fn masked(&self) -> bool {
+        !self.base.as_ref().unwrap_or(&self.config).no_mask
+    }
+
+    /// A style code `[1, n]` from mix weights, or `None` for an unstylized run.
+    pub fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
+        crate::style_mix::code(self.model.n_styles(), mix, &self.dir, device)
+    }
+}
+
+/// Stylizes the pretrained run `cfg.from` into `opts.out_dir`.
+pub fn stylize(cfg: &IdrRunConfig, vgg: Vgg, device: &Device, opts: TrainOptions) -> Result<TrainOutcome<IdrModel>> {
+    cfg.kind()?;
+    let from = cfg.from.clone().context("stylizing needs --from RUN")?;
+    let base = IdrRun::load(&from, device)?;
+    if base.base.is_some() {
+        bail!("{} is already a stylized run; stylize its pretrained run instead", from.display());
+    }
+    if cfg.sdf != base.config.sdf {
+        bail!("--sdf {} does not match the pretrained run {} (--sdf {})", cfg.sdf, from.display(), base.config.sdf);
+    }
+    let styles: Vec<RgbImage> = cfg.styles.iter().map(|p| RgbImage::load(p)).collect::<Result<_>>()?;
+    let mut cfg = cfg.clone();
+    cfg.downscale = base.config.downscale;
+    cfg.holdout = base.config.holdout;
+    cfg.no_mask = base.config.no_mask;
+    cfg.init_radius = base.config.init_radius;
+    cfg.steps = cfg.steps_for(IdrKind::Stylize);
+    cfg.lr = cfg.lr_for(IdrKind::Stylize);
+    let out = opts.out_dir.clone();
+    write_config(&cfg, &out, opts.resume)?;
+    let ad = device.clone().autodiff();
+    let n = styles.len();
+    let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || {
+        base.model.clone().to_device(&ad).with_stylizer(n, cfg.sim_width, cfg.position_freqs, &ad)
+    });
+    let vgg = vgg.to_device(&ad);
+    let targets: Vec<StyleTarget> = styles
+        .iter()
+        .map(|s| StyleTarget::from_image(&vgg, s.fit_within(cfg.style_size).to_tensor(&ad)))
+        .collect();
+    let (w, h) = base.scene.resolution();
+    let stride = if cfg.stride > 0 {
+        cfg.stride as u32
+    } else {
+        ((0.5 * w.min(h) as f32 / cfg.patch.max(1) as f32).round() as u32).max(1)
+    };
+    let patch = PatchSpec::new(cfg.patch as u32, stride).fitted(w, h)?;
+    let weights = {
+        let d = LossWeights::default_for(vgg.preprocess);
+        LossWeights {
+            content: cfg.content_weight.unwrap_or(d.content),
+            style: cfg.style_weight.unwrap_or(d.style),
+        }
+    };
+    let style = SurfaceStylization {
+        vgg,
+        targets: StyleTarget::stack(&targets),
+        codes: one_hot_codes(n, &ad),
+        patch,
+    };
+    let views = base.scene.split(Split::Val).to_vec();
+    let mut task = IdrTask::new(base.scene, cfg.rays, cfg.steps, !cfg.no_mask, Some(style), cfg.eval_every, views, out.join("val"), &ad);
+    let mut phase = Phase::new("stylize", IdrObjective::Stylize, cfg.steps, cfg.lr)
+        .weight("style", weights.style)
+        .weight("content", weights.content);
+    phase = if cfg.sdf_lr_ratio > 0.0 {
+        phase.lr_mult("sdf", cfg.sdf_lr_ratio)
+    } else {
+        phase.freeze("sdf")
+    };
+    let outcome = Trainer::new(vec![phase], opts).run(&mut task, model)?;
+    if outcome.finished {
+        final_pictures(&outcome.model, &task, &out, device)?;
+    }
+    Ok(outcome)
+}

@@ -1,0 +1,220 @@
+//! The IDR task: pretraining a surface from masked photos (masked L1 colour, IDR's mask loss,
+//! eikonal), or stylizing it on strided patches inside the mask with VGG losses.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use burn::prelude::*;
+use ins_core::data::{Scene, Split};
+use ins_core::loss::{content_loss, psnr, style_loss};
+use ins_core::render::patches::{PatchSampler, PatchSpec};
+use ins_core::render::rays::RaySampler;
+use ins_core::render::sphere_tracing::TraceOptions;
+use ins_core::train::{LossTerms, StepContext, Task};
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use vgg_import::Vgg;
+
+use super::eval::{evaluate_views, save_pictures};
+use super::model::IdrModel;
+use super::render::render_surface;
+
+/// What a phase of an IDR run computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum IdrObjective {
+    /// Masked colour, mask and eikonal losses on random rays.
+    Pretrain,
+    /// Style and content losses on strided patches inside the mask.
+    Stylize,
+}
+
+/// What stylization needs.
+pub struct SurfaceStylization {
+    /// Frozen VGG-16.
+    pub vgg: Vgg,
+    /// Gram targets per style layer.
+    pub targets: [Tensor<3>; 4],
+    /// One-hot codes.
+    pub codes: Tensor<2>,
+    /// Patch geometry.
+    pub patch: PatchSpec,
+}
+
+/// The task.
+pub struct IdrTask {
+    /// The scene (masks included unless trained with `--no-mask`).
+    pub scene: Scene,
+    /// Rays per pretraining step.
+    pub rays: usize,
+    /// Steps of the pretraining phase (the mask loss sharpens over them).
+    pub steps: usize,
+    /// Whether masks are used.
+    pub masked: bool,
+    /// Stylization, when stylizing.
+    pub style: Option<SurfaceStylization>,
+    /// Steps between evaluations (0: never during training).
+    pub eval_every: usize,
+    /// Held-out views to evaluate.
+    pub eval_views: Vec<usize>,
+    /// Where evaluation pictures go.
+    pub eval_dir: PathBuf,
+    /// Ray tracer settings.
+    pub trace: TraceOptions,
+    device: Device,
+}
+
+impl IdrTask {
+    /// A task on `scene`, computing on `device` (an autodiff device).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        scene: Scene,
+        rays: usize,
+        steps: usize,
+        masked: bool,
+        style: Option<SurfaceStylization>,
+        eval_every: usize,
+        eval_views: Vec<usize>,
+        eval_dir: PathBuf,
+        device: &Device,
+    ) -> Self {
+        Self {
+            scene,
+            rays,
+            steps,
+            masked,
+            style,
+            eval_every,
+            eval_views,
+            eval_dir,
+            trace: TraceOptions::default(),
+            device: device.clone(),
+        }
+    }
+
+    /// IDR's mask sharpness α: 50, doubling at each fifth of pretraining (up to 1600).
+    pub fn alpha(&self, step: usize) -> f32 {
+        let fifth = (self.steps / 5).max(1);
+        50.0 * 2f32.powi((step / fifth).min(5) as i32)
+    }
+
+    fn pretrain_losses(&self, model: &IdrModel, step: usize, seed: u64) -> Result<LossTerms> {
+        let batch = RaySampler::new(self.rays, seed).sample(&self.scene, Split::Train)?;
+        let r = batch.len();
+        let out = render_surface(model, &batch.rays, None, [0.0; 3], &self.trace, true, &self.device);
+        let mask: Vec<f32> = if self.masked { batch.mask.clone() } else { vec![1.0; r] };
+        // Colour: L1 over rays that hit inside the mask, normalised by all rays (IDR).
+        let inside: Vec<f32> = (0..r).map(|i| if out.traced.hit[i] && mask[i] > 0.5 { 1.0 } else { 0.0 }).collect();
+        let inside_t = Tensor::<1>::from_floats(inside.as_slice(), &self.device).reshape([r, 1]);
+        let target = Tensor::<1>::from_floats(batch.rgb.as_flattened(), &self.device).reshape([r, 3]);
+        let rgb = (out.rgb.clone() - target.clone()).abs() * inside_t.clone();
+        let rgb_loss = rgb.sum().div_scalar(r as f32);
+        // Logged only (weight 0): the MSE inside the mask, read with the other terms.
+        let mse_in = ((out.rgb - target).square() * inside_t)
+            .sum()
+            .div_scalar((inside.iter().sum::<f32>() * 3.0).max(1.0));
+        let mut terms = LossTerms::default()
+            .term("rgb", rgb_loss)
+            .term("mse_mask", mse_in)
+            .metric_of("psnr_mask", "mse_mask", psnr)
+            .metric("hit_rate", out.hits.len() as f64 / r as f64);
+        // Mask: soft occupancy at the surface point (hits outside the mask) or at the point of
+        // smallest SDF (misses), BCE against the mask, scaled by 1/α.
+        if self.masked {
+            let alpha = self.alpha(step);
+            let outside: Vec<usize> = (0..r).filter(|&i| inside[i] == 0.0).collect();
+            if !outside.is_empty() {
+                let pts: Vec<f32> = outside
+                    .iter()
+                    .flat_map(|&i| {
+                        let t = if out.traced.hit[i] { out.traced.t[i] } else { out.traced.t_min_sdf[i] };
+                        batch.rays.point(i, t).to_array()
+                    })
+                    .collect();
+                let m = outside.len();
+                let gt: Vec<f32> = outside.iter().map(|&i| mask[i]).collect();
+                let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([m, 3]);
+                let s = model.sdf.sdf(x);
+                let logits = s.mul_scalar(-alpha);
+                let gt = Tensor::<1>::from_floats(gt.as_slice(), &self.device);
+                // BCE with logits, stable form: max(z, 0) − z·y + log(1 + e^{−|z|}).
+                let bce = logits.clone().clamp_min(0.0) - logits.clone() * gt + logits.abs().neg().exp().add_scalar(1.0).log();
+                terms = terms.term("mask", bce.sum().div_scalar(alpha * r as f32));
+            } else {
+                terms = terms.term("mask", Tensor::<1>::zeros([1], &self.device));
+            }
+        }
+        // Eikonal: |∇f| = 1 at random points of the unit sphere's box and at the surface points.
+        let mut rng = SmallRng::seed_from_u64(seed ^ 0xe1c0);
+        let k = r.min(4096);
+        let pts: Vec<f32> = (0..k * 3).map(|_| rng.random::<f32>() * 2.0 - 1.0).collect();
+        let (_, _, g) = model.sdf.forward_with_gradient(Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]));
+        let g = match out.surface_gradients {
+            Some(gs) => Tensor::cat(vec![g, gs], 0),
+            None => g,
+        };
+        let eik = g.square().sum_dim(1).sqrt().sub_scalar(1.0).square().mean();
+        Ok(terms.term("eikonal", eik))
+    }
+
+    fn stylize_losses(&self, model: &IdrModel, seed: u64) -> Result<LossTerms> {
+        let style = self.style.as_ref().context("a stylization phase without styles")?;
+        let mut sampler = PatchSampler::new(style.patch.size, style.patch.stride, seed);
+        let patch = sampler.sample(&self.scene, Split::Train)?;
+        let k = style.patch.size as usize;
+        let out = render_surface(model, &patch.batch.rays, Some(style.codes.clone()), [0.0; 3], &self.trace, true, &self.device);
+        let s = style.codes.dims()[0];
+        let images = out.rgb.reshape([s, k, k, 3]).permute([0, 3, 1, 2]);
+        // The photo inside its mask, on the same black background as the render.
+        let mask: Vec<f32> = if self.masked { patch.batch.mask.clone() } else { vec![1.0; k * k] };
+        let photo: Vec<f32> = patch.batch.rgb.iter().zip(&mask).flat_map(|(c, m)| c.map(|v| v * m)).collect();
+        let photo = Tensor::<1>::from_floats(photo.as_slice(), &self.device)
+            .reshape([1, k, k, 3])
+            .permute([0, 3, 1, 2]);
+        let content_target = style.vgg.features(photo).relu2_2.detach();
+        let feats = style.vgg.features(images);
+        Ok(LossTerms::default()
+            .term("style", style_loss(&feats, &style.targets))
+            .term("content", content_loss(&feats, &content_target))
+            .metric("hit_rate", out.hits.len() as f64 / (k * k) as f64))
+    }
+}
+
+impl Task for IdrTask {
+    type Model = IdrModel;
+    type Objective = IdrObjective;
+
+    fn terms(&self, objective: IdrObjective) -> &'static [&'static str] {
+        match (objective, self.masked) {
+            (IdrObjective::Pretrain, true) => &["rgb", "mse_mask", "mask", "eikonal"],
+            (IdrObjective::Pretrain, false) => &["rgb", "mse_mask", "eikonal"],
+            (IdrObjective::Stylize, _) => &["style", "content"],
+        }
+    }
+
+    fn losses(&mut self, model: &IdrModel, step: &StepContext<IdrObjective>) -> Result<LossTerms> {
+        match step.phase.objective {
+            IdrObjective::Pretrain => self.pretrain_losses(model, step.step_in_phase, step.seed),
+            IdrObjective::Stylize => self.stylize_losses(model, step.seed),
+        }
+    }
+
+    fn after_step(&mut self, model: &IdrModel, step: &StepContext<IdrObjective>) -> Result<Vec<(String, f64)>> {
+        let done = step.step_in_phase + 1;
+        if self.eval_every == 0 || !done.is_multiple_of(self.eval_every) || self.eval_views.is_empty() {
+            return Ok(Vec::new());
+        }
+        let m = model.valid();
+        let device = self.device.clone().inner();
+        let code = self.style.as_ref().map(|s| s.codes.clone().slice([0..1]).inner());
+        let evals = evaluate_views(&m, &self.scene, &self.eval_views, code, self.masked, &self.trace, &device)?;
+        save_pictures(&evals, &self.eval_dir.join(format!("step_{:06}.png", step.global_step + 1)))?;
+        let n = evals.len().max(1) as f64;
+        Ok(vec![
+            ("val_iou".into(), evals.iter().map(|e| e.iou).sum::<f64>() / n),
+            ("val_psnr_mask".into(), evals.iter().map(|e| e.psnr_mask).sum::<f64>() / n),
+        ])
+    }
+}
+
