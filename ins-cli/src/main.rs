@@ -3,6 +3,7 @@
 
 mod bench;
 mod data_cmd;
+mod idr_cmd;
 mod nerf_cmd;
 mod siren_cmd;
 mod vgg_cmd;
@@ -41,6 +42,11 @@ enum Command {
         #[command(subcommand)]
         variant: EvalVariant,
     },
+    /// Export a trained representation (meshes of surfaces).
+    Export {
+        #[command(subcommand)]
+        command: ExportCommand,
+    },
     /// VGG-16 weights: fetch, inspect, extract features.
     Vgg {
         #[command(subcommand)]
@@ -61,6 +67,8 @@ enum TrainVariant {
     Siren(siren_cmd::TrainSiren),
     /// NeRF + INS: pretrain a radiance field on a scene (--scene), or stylize one (--from).
     Nerf(nerf_cmd::TrainNerf),
+    /// IDR + INS: reconstruct a surface from masked views (--scene), or stylize one (--from).
+    Idr(idr_cmd::TrainIdr),
 }
 
 #[derive(Subcommand, Debug)]
@@ -69,12 +77,22 @@ enum RenderVariant {
     Siren(siren_cmd::RenderSiren),
     /// Render views, a split or a camera path of a NeRF run (PNG, folder, GIF, MP4).
     Nerf(nerf_cmd::RenderNerf),
+    /// Render a view or a turntable of an IDR run (colour or shaded normals).
+    Idr(idr_cmd::RenderIdr),
 }
 
 #[derive(Subcommand, Debug)]
 enum EvalVariant {
     /// PSNR and SSIM on held-out views; depth and opacity against the teacher for stylized runs.
     Nerf(nerf_cmd::EvalNerf),
+    /// Silhouette IoU and PSNR inside the mask on the held-out views of an IDR run.
+    Idr(idr_cmd::EvalIdr),
+}
+
+#[derive(Subcommand, Debug)]
+enum ExportCommand {
+    /// Marching cubes of an IDR run's surface, vertex-coloured, as a binary PLY.
+    Mesh(idr_cmd::ExportMesh),
 }
 
 /// The matches of `train <variant>`, where a variant's flags live (to tell flags given on the
@@ -92,14 +110,20 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
             match variant {
                 TrainVariant::Siren(a) => siren_cmd::train(a, m),
                 TrainVariant::Nerf(a) => nerf_cmd::train(a, m),
+                TrainVariant::Idr(a) => idr_cmd::train(a, m),
             }
         }
         Command::Render { variant } => match variant {
             RenderVariant::Siren(a) => siren_cmd::render(a),
             RenderVariant::Nerf(a) => nerf_cmd::render(a),
+            RenderVariant::Idr(a) => idr_cmd::render(a),
         },
         Command::Eval { variant } => match variant {
             EvalVariant::Nerf(a) => nerf_cmd::eval(a),
+            EvalVariant::Idr(a) => idr_cmd::eval(a),
+        },
+        Command::Export { command } => match command {
+            ExportCommand::Mesh(a) => idr_cmd::export_mesh(a),
         },
         Command::Vgg { command } => vgg_cmd::run(command),
         Command::Data { command } => data_cmd::run(command),
