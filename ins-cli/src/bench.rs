@@ -3,22 +3,22 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
+use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 use clap::Args;
 use ins_core::backend::BackendChoice;
 use ins_core::data::plain_image::pixel_coordinates;
 use ins_core::loss::{StyleTarget, content_loss, mse, style_loss};
+use ins_core::modules::cim::SirenCimConfig;
 use ins_core::modules::field::CimKind;
+use ins_core::modules::ins::Ins;
+use ins_core::modules::sim::SimConfig;
 use ins_core::render::geometry::Vec3;
 use ins_core::render::rays::Rays;
 use ins_models::nerf::NerfModel;
 use ins_models::nerf::model::NerfArch;
 use ins_models::nerf::render::{RenderRays, Sampling, render};
-use ins_core::modules::cim::SirenCimConfig;
-use ins_core::modules::ins::Ins;
-use ins_core::modules::sim::SimConfig;
-use burn::optim::{AdamConfig, GradientsParams};
 use vgg_import::Vgg16Features;
 
 #[derive(Args, Debug)]
@@ -169,9 +169,17 @@ fn bench_rays(n: usize, seed: u64) -> RenderRays {
     let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
     let mut rays = Rays::default();
     for _ in 0..n {
-        let o = Vec3::new(0.1 * normal(&mut rng), 0.1 * normal(&mut rng), 4.0 + 0.1 * normal(&mut rng));
-        let d = Vec3::new(0.2 * normal(&mut rng), 0.2 * normal(&mut rng), -1.0 + 0.2 * normal(&mut rng))
-            .normalize();
+        let o = Vec3::new(
+            0.1 * normal(&mut rng),
+            0.1 * normal(&mut rng),
+            4.0 + 0.1 * normal(&mut rng),
+        );
+        let d = Vec3::new(
+            0.2 * normal(&mut rng),
+            0.2 * normal(&mut rng),
+            -1.0 + 0.2 * normal(&mut rng),
+        )
+        .normalize();
         rays.push(o, d, 2.0, 6.0);
     }
     RenderRays {
@@ -205,7 +213,10 @@ fn bench_nerf_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let rays = bench_rays(1024, 1);
     let target = Tensor::<2>::random([1024, 3], Distribution::Uniform(0.0, 1.0), device);
     let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
-    let sampling = Sampling::CoarseFine { coarse: 64, fine: 64 };
+    let sampling = Sampling::CoarseFine {
+        coarse: 64,
+        fine: 64,
+    };
     let mut seed = 0;
     timed(steps, || {
         let m = model.take().expect("model");
@@ -215,7 +226,15 @@ fn bench_nerf_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
             + mse(r.coarse_rgb.expect("coarse render"), target.clone());
         let grads = GradientsParams::from_grads(loss.backward(), &m);
         let m = adam.step(5e-4, m, grads);
-        let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+        let _ = m
+            .field
+            .color
+            .mlp
+            .rgb
+            .weight
+            .val()
+            .slice([0..1, 0..1])
+            .into_scalar::<f32>();
         model = Some(m);
         Ok(())
     })
@@ -223,10 +242,18 @@ fn bench_nerf_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
 
 fn bench_nerf_stylize(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let vgg = Vgg16Features::random(device);
-    let tf = vgg.forward(Tensor::<4>::random([1, 3, 256, 256], Distribution::Uniform(0.0, 1.0), device));
+    let tf = vgg.forward(Tensor::<4>::random(
+        [1, 3, 256, 256],
+        Distribution::Uniform(0.0, 1.0),
+        device,
+    ));
     let targets = StyleTarget::from_features(&tf).grams;
     let content = vgg
-        .forward(Tensor::<4>::random([1, 3, 32, 32], Distribution::Uniform(0.0, 1.0), device))
+        .forward(Tensor::<4>::random(
+            [1, 3, 32, 32],
+            Distribution::Uniform(0.0, 1.0),
+            device,
+        ))
         .relu2_2
         .detach();
     let base = NerfModel::new(&mlp_arch(), BOX, device);
@@ -237,23 +264,44 @@ fn bench_nerf_stylize(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let rays = bench_rays(1024, 2);
     let code = Tensor::<2>::from_floats([[1.0, 0.0]], device);
     let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
-    let sampling = Sampling::CoarseFine { coarse: 64, fine: 64 };
+    let sampling = Sampling::CoarseFine {
+        coarse: 64,
+        fine: 64,
+    };
     let mut seed = 0;
     timed(steps, || {
         let m = model.take().expect("model");
         seed += 1;
-        let r = render(&m, &rays, sampling, Some(code.clone()), [0.0; 3], Some(seed), device);
+        let r = render(
+            &m,
+            &rays,
+            sampling,
+            Some(code.clone()),
+            [0.0; 3],
+            Some(seed),
+            device,
+        );
         let img = r.fine.rgb.reshape([1, 32, 32, 3]).permute([0, 3, 1, 2]);
         let f = vgg.forward(img);
         let (teacher_raw, _) = teacher.forward(r.points.detach());
         let [s, n] = r.raw.dims();
-        let geo = (r.raw - teacher_raw.detach().reshape([1, n]).expand([s, n])).abs().mean();
+        let geo = (r.raw - teacher_raw.detach().reshape([1, n]).expand([s, n]))
+            .abs()
+            .mean();
         let loss = style_loss(&f, &targets).mul_scalar(STYLE_WEIGHT)
             + content_loss(&f, &content)
             + geo.mul_scalar(1e6);
         let grads = GradientsParams::from_grads(loss.backward(), &m);
         let m = adam.step(5e-4, m, grads);
-        let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+        let _ = m
+            .field
+            .color
+            .mlp
+            .rgb
+            .weight
+            .val()
+            .slice([0..1, 0..1])
+            .into_scalar::<f32>();
         model = Some(m);
         Ok(())
     })
@@ -275,7 +323,13 @@ fn bench_nerf_grid(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let mut grid = ins_models::nerf::run::fresh_grid(BOX, 128);
     grid.update(usize::MAX, 1, |p| {
         p.chunks_exact(3)
-            .map(|q| if Vec3::new(q[0], q[1], q[2]).length() < 0.8 { 100.0 } else { 0.0 })
+            .map(|q| {
+                if Vec3::new(q[0], q[1], q[2]).length() < 0.8 {
+                    100.0
+                } else {
+                    0.0
+                }
+            })
             .collect()
     });
     let rays = bench_rays(GRID_RAYS, 3);
@@ -301,7 +355,15 @@ fn bench_nerf_grid(device: &Device, steps: usize) -> Result<Vec<f64>> {
         let t2 = Instant::now();
         let m = adam.step(1e-2, m, grads);
         if verbose {
-            let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+            let _ = m
+                .field
+                .color
+                .mlp
+                .rgb
+                .weight
+                .val()
+                .slice([0..1, 0..1])
+                .into_scalar::<f32>();
             eprintln!(
                 "samples {} forward {:?} backward {:?} adam {:?}",
                 r.samples,
@@ -310,7 +372,15 @@ fn bench_nerf_grid(device: &Device, steps: usize) -> Result<Vec<f64>> {
                 t2.elapsed()
             );
         }
-        let _ = m.field.color.layers[0].weight.val().slice([0..1, 0..1]).into_scalar::<f32>();
+        let _ = m
+            .field
+            .color
+            .mlp
+            .rgb
+            .weight
+            .val()
+            .slice([0..1, 0..1])
+            .into_scalar::<f32>();
         model = Some(m);
         Ok(())
     })
@@ -338,7 +408,9 @@ fn bench_hash_grid(device: &Device, steps: usize, kernel: bool) -> Result<Vec<f6
             reference::encode(x.clone(), t.clone(), grid.shape)
         };
         let grads = (enc * g.clone()).sum().backward();
-        let gt = t.grad(&grads).ok_or_else(|| anyhow::anyhow!("no table gradient"))?;
+        let gt = t
+            .grad(&grads)
+            .ok_or_else(|| anyhow::anyhow!("no table gradient"))?;
         let _ = gt.slice([0..1, 0..1]).into_scalar::<f32>();
         Ok(())
     })

@@ -174,7 +174,11 @@ fn check(
             Bounds::Sphere { center, radius } => {
                 println!("bounds   sphere centre {center:?} radius {radius}")
             }
-            Bounds::Aabb { min, max } => println!("bounds   box {} – {}", fmt3(min.to_array()), fmt3(max.to_array())),
+            Bounds::Aabb { min, max } => println!(
+                "bounds   box {} – {}",
+                fmt3(min.to_array()),
+                fmt3(max.to_array())
+            ),
         }
         match s.mean_mask_coverage {
             Some(c) => println!(

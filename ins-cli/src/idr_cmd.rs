@@ -47,12 +47,20 @@ pub fn train(a: TrainIdr, matches: &ArgMatches) -> Result<()> {
     opts.quiet = a.run.quiet;
     let outcome = match kind {
         IdrKind::Pretrain => {
-            eprintln!("reconstructing a surface ({} SDF) with {backend} into {}", cfg.sdf, a.out.display());
+            eprintln!(
+                "reconstructing a surface ({} SDF) with {backend} into {}",
+                cfg.sdf,
+                a.out.display()
+            );
             ins_models::idr::pretrain(&cfg, &device, opts)?
         }
         IdrKind::Stylize => {
             let vgg = load_vgg(&a.vgg.source(), &device)?;
-            eprintln!("stylizing a surface with {} style(s) on {backend} into {}", cfg.styles.len(), a.out.display());
+            eprintln!(
+                "stylizing a surface with {} style(s) on {backend} into {}",
+                cfg.styles.len(),
+                a.out.display()
+            );
             ins_models::idr::stylize(&cfg, vgg, &device, opts)?
         }
     };
@@ -106,21 +114,6 @@ pub struct RenderIdr {
     backend: BackendChoice,
 }
 
-fn resized(camera: &Camera, size: Option<(usize, usize)>) -> Camera {
-    let Some((w, h)) = size else { return camera.clone() };
-    let (sx, sy) = (w as f32 / camera.width as f32, h as f32 / camera.height as f32);
-    Camera {
-        width: w as u32,
-        height: h as u32,
-        fx: camera.fx * sx,
-        fy: camera.fy * sy,
-        cx: camera.cx * sx,
-        cy: camera.cy * sy,
-        skew: camera.skew * sx,
-        c2w: camera.c2w,
-    }
-}
-
 pub fn render(a: RenderIdr) -> Result<()> {
     let device = a.backend.device();
     let run = IdrRun::load(&a.run, &device)?;
@@ -129,15 +122,27 @@ pub fn render(a: RenderIdr) -> Result<()> {
     let model = run.model.valid();
     let trace = TraceOptions::default();
     let shoot = |camera: &Camera| -> Result<RgbImage> {
-        let r = render_camera(&model, &run.scene, &resized(camera, size), code.clone(), &trace, &device)?;
-        Ok(if a.normals { r.normal_image() } else { r.image() })
+        let r = render_camera(
+            &model,
+            &run.scene,
+            &crate::view_size::resized(camera, size),
+            code.clone(),
+            &trace,
+            &device,
+        )?;
+        Ok(if a.normals {
+            r.normal_image()
+        } else {
+            r.image()
+        })
     };
     if let Some(view) = a.view {
-        let v = run
-            .scene
-            .views
-            .get(view)
-            .with_context(|| format!("--view {view}: the scene has {} views", run.scene.views.len()))?;
+        let v = run.scene.views.get(view).with_context(|| {
+            format!(
+                "--view {view}: the scene has {} views",
+                run.scene.views.len()
+            )
+        })?;
         shoot(&v.camera)?.save(&a.out)?;
         println!("{}", a.out.display());
         return Ok(());
@@ -154,7 +159,9 @@ pub fn render(a: RenderIdr) -> Result<()> {
         eprint!("\rrendered {}/{}", i + 1, cameras.len());
     }
     eprintln!();
-    let names: Vec<String> = (0..frames.len()).map(|i| format!("frame_{i:04}.png")).collect();
+    let names: Vec<String> = (0..frames.len())
+        .map(|i| format!("frame_{i:04}.png"))
+        .collect();
     for w in write_frames(&frames, &names, &output, 12)? {
         println!("{}", w.display());
     }
@@ -176,10 +183,21 @@ pub fn eval(a: EvalIdr) -> Result<()> {
     let run = IdrRun::load(&a.run, &device)?;
     let views = run.scene.split(ins_core::data::Split::Val).to_vec();
     if views.is_empty() {
-        bail!("{}: the run holds no views out; train with --holdout K to evaluate", a.run.display());
+        bail!(
+            "{}: the run holds no views out; train with --holdout K to evaluate",
+            a.run.display()
+        );
     }
     let code = run.code(None, &device)?;
-    let evals = evaluate_views(&run.model.valid(), &run.scene, &views, code, run.masked(), &TraceOptions::default(), &device)?;
+    let evals = evaluate_views(
+        &run.model.valid(),
+        &run.scene,
+        &views,
+        code,
+        run.masked(),
+        &TraceOptions::default(),
+        &device,
+    )?;
     for e in &evals {
         println!(
             "{}",
@@ -219,7 +237,13 @@ pub struct ExportMesh {
 }
 
 pub fn export_mesh(a: ExportMesh) -> Result<()> {
-    if a.out.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() != Some("ply") {
+    if a.out
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .as_deref()
+        != Some("ply")
+    {
         bail!("{}: meshes are written as .ply", a.out.display());
     }
     ins_models::idr::mesh::check_resolution(a.resolution)?;
@@ -228,11 +252,17 @@ pub fn export_mesh(a: ExportMesh) -> Result<()> {
     let code = run.code(a.mix.as_deref(), &device)?;
     let (mesh, colors) = extract_mesh(&run.model.valid(), a.resolution, code, &device)?;
     if mesh.triangles.is_empty() {
-        bail!("{}: the SDF has no zero level set inside the unit sphere (nothing to mesh)", a.run.display());
+        bail!(
+            "{}: the SDF has no zero level set inside the unit sphere (nothing to mesh)",
+            a.run.display()
+        );
     }
     ins_io::write_atomic_with(&a.out, |tmp| -> Result<()> {
-        let mut f = std::io::BufWriter::new(std::fs::File::create(tmp).with_context(|| format!("writing {}", a.out.display()))?);
-        mesh.write_ply(&mut f, &colors).with_context(|| format!("writing {}", a.out.display()))
+        let mut f = std::io::BufWriter::new(
+            std::fs::File::create(tmp).with_context(|| format!("writing {}", a.out.display()))?,
+        );
+        mesh.write_ply(&mut f, &colors)
+            .with_context(|| format!("writing {}", a.out.display()))
     })?;
     println!(
         "{}",

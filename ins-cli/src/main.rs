@@ -8,6 +8,7 @@ mod nerf_cmd;
 mod siren_cmd;
 mod vgg_cmd;
 mod video;
+mod view_size;
 
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
 
@@ -155,6 +156,9 @@ fn main() {
     // they came from.
     let backtrace = std::env::var_os("RUST_BACKTRACE").is_some_and(|v| v != "0");
     std::panic::set_hook(Box::new(move |info| {
+        if ins_core::contain::is_contained() {
+            return; // a decoder's panic on damaged input, reported as an error naming the file
+        }
         let msg = info
             .payload()
             .downcast_ref::<String>()

@@ -18,8 +18,8 @@ use ins_models::nerf::{NerfRun, NerfRunConfig};
 use vgg_import::load_vgg;
 
 use crate::siren_cmd::{RunArgs, parse_size};
-use crate::video::{write_frames, FrameOutput};
 use crate::vgg_cmd::VggArgs;
+use crate::video::{FrameOutput, write_frames};
 
 #[derive(Args, Debug)]
 pub struct TrainNerf {
@@ -49,7 +49,9 @@ pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
             eprintln!(
                 "pretraining a NeRF ({} content module) on {} with {backend} into {}",
                 cfg.cim,
-                cfg.scene.as_ref().map_or(String::new(), |p| p.display().to_string()),
+                cfg.scene
+                    .as_ref()
+                    .map_or(String::new(), |p| p.display().to_string()),
                 a.out.display()
             );
             ins_models::nerf::pretrain(&cfg, &device, opts)?
@@ -58,7 +60,9 @@ pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
             let vgg = load_vgg(&a.vgg.source(), &device)?;
             eprintln!(
                 "stylizing {} with {} style{} on {backend} into {}",
-                cfg.from.as_ref().map_or(String::new(), |p| p.display().to_string()),
+                cfg.from
+                    .as_ref()
+                    .map_or(String::new(), |p| p.display().to_string()),
                 cfg.styles.len(),
                 if cfg.styles.len() == 1 { "" } else { "s" },
                 a.out.display()
@@ -126,21 +130,6 @@ pub struct RenderNerf {
     backend: BackendChoice,
 }
 
-fn resized(camera: &Camera, size: Option<(usize, usize)>) -> Camera {
-    let Some((w, h)) = size else { return camera.clone() };
-    let (sx, sy) = (w as f32 / camera.width as f32, h as f32 / camera.height as f32);
-    Camera {
-        width: w as u32,
-        height: h as u32,
-        fx: camera.fx * sx,
-        fy: camera.fy * sy,
-        cx: camera.cx * sx,
-        cy: camera.cy * sy,
-        skew: camera.skew * sx,
-        c2w: camera.c2w,
-    }
-}
-
 fn picture(r: &ViewRender, depth: bool) -> RgbImage {
     if depth { r.depth_picture() } else { r.image() }
 }
@@ -153,8 +142,16 @@ pub fn render(a: RenderNerf) -> Result<()> {
     let model = run.model.valid();
     let scene = &run.scene;
     let shoot = |camera: &Camera| -> Result<RgbImage> {
-        let cam = resized(camera, size);
-        let r = render_camera(&model, scene, &cam, run.sampling(), code.clone(), run.background(), &device)?;
+        let cam = crate::view_size::resized(camera, size);
+        let r = render_camera(
+            &model,
+            scene,
+            &cam,
+            run.sampling(),
+            code.clone(),
+            run.background(),
+            &device,
+        )?;
         Ok(picture(&r, a.depth))
     };
     let c = &a.cameras;
@@ -185,7 +182,9 @@ pub fn render(a: RenderNerf) -> Result<()> {
             other => bail!("unknown --path {other:?} (expected spiral or turntable)"),
         }
         .context("the scene has no cameras to build a path from")?;
-        let names = (0..cams.len()).map(|i| format!("frame_{i:04}.png")).collect();
+        let names = (0..cams.len())
+            .map(|i| format!("frame_{i:04}.png"))
+            .collect();
         (cams, names)
     };
     let output = FrameOutput::for_path(&a.out)?;
@@ -238,7 +237,11 @@ fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> (f64, f64, usi
     }
     errors.sort_by(f64::total_cmp);
     let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
-    (median, agree as f64 / student.opacity.len().max(1) as f64, errors.len())
+    (
+        median,
+        agree as f64 / student.opacity.len().max(1) as f64,
+        errors.len(),
+    )
 }
 
 pub fn eval(a: EvalNerf) -> Result<()> {
@@ -250,17 +253,29 @@ pub fn eval(a: EvalNerf) -> Result<()> {
         None => ins_models::nerf::run::heldout_views(scene),
     };
     if views.is_empty() {
-        bail!("{}: no held-out views to evaluate (choose --split)", scene.root.display());
+        bail!(
+            "{}: no held-out views to evaluate (choose --split)",
+            scene.root.display()
+        );
     }
     let model = run.model.valid();
     let stylized = run.base.is_some();
     let code = run.code(None, &device)?;
-    let evals = evaluate_views(&model, scene, &views, run.sampling(), code, run.background(), &device)?;
+    let evals = evaluate_views(
+        &model,
+        scene,
+        &views,
+        run.sampling(),
+        code,
+        run.background(),
+        &device,
+    )?;
     let teacher = match &run.config.from {
         Some(from) if stylized => Some(NerfRun::load(from, &device)?),
         _ => None,
     };
-    let (mut sum_psnr, mut sum_ssim, mut depth_errors, mut agreements) = (0.0, 0.0, Vec::new(), Vec::new());
+    let (mut sum_psnr, mut sum_ssim, mut depth_errors, mut agreements) =
+        (0.0, 0.0, Vec::new(), Vec::new());
     for e in &evals {
         let mut line = serde_json::json!({
             "view": e.view,
@@ -269,7 +284,15 @@ pub fn eval(a: EvalNerf) -> Result<()> {
         });
         if let Some(t) = &teacher {
             let cam = &scene.views[e.view].camera;
-            let tr = render_camera(&t.model.valid(), &t.scene, cam, t.sampling(), None, t.background(), &device)?;
+            let tr = render_camera(
+                &t.model.valid(),
+                &t.scene,
+                cam,
+                t.sampling(),
+                None,
+                t.background(),
+                &device,
+            )?;
             let (median, agree, pixels) = depth_agreement(&e.render, &tr);
             line["depth_rel_error_median"] = median.into();
             line["opacity_agreement"] = agree.into();
@@ -291,7 +314,8 @@ pub fn eval(a: EvalNerf) -> Result<()> {
     if !depth_errors.is_empty() {
         mean["depth_rel_error_median"] = (depth_errors.iter().sum::<f64>() / n).into();
         mean["opacity_agreement"] = (agreements.iter().sum::<f64>() / n).into();
-        mean["note"] = "PSNR/SSIM of a stylized run compare the stylized render with the photos".into();
+        mean["note"] =
+            "PSNR/SSIM of a stylized run compare the stylized render with the photos".into();
     }
     println!("{mean}");
     Ok(())

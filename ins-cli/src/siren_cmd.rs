@@ -68,7 +68,11 @@ pub struct RenderSiren {
 }
 
 /// Writes a generated demo input once (atomically, so a killed run never leaves half of one).
-fn demo_input(dir: &Path, name: &str, make: fn(usize) -> ins_core::imaging::RgbImage) -> Result<PathBuf> {
+fn demo_input(
+    dir: &Path,
+    name: &str,
+    make: fn(usize) -> ins_core::imaging::RgbImage,
+) -> Result<PathBuf> {
     let p = dir.join(name);
     if !p.exists() {
         make(256).save(&p)?;
@@ -80,10 +84,18 @@ pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
     let mut cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
     let inputs = a.out.join("inputs");
     if cfg.content.is_none() {
-        cfg.content = Some(demo_input(&inputs, "demo_content.png", ins_models::demo::demo_content)?);
+        cfg.content = Some(demo_input(
+            &inputs,
+            "demo_content.png",
+            ins_models::demo::demo_content,
+        )?);
     }
     if cfg.styles.is_empty() {
-        cfg.styles = vec![demo_input(&inputs, "demo_style.png", ins_models::demo::demo_style)?];
+        cfg.styles = vec![demo_input(
+            &inputs,
+            "demo_style.png",
+            ins_models::demo::demo_style,
+        )?];
     }
     if let Some(n) = a.steps {
         cfg.fit_steps = n / 2;

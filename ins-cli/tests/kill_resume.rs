@@ -14,10 +14,35 @@ use rand::{Rng, SeedableRng};
 
 fn train_args(out: &Path) -> Vec<String> {
     [
-        "train", "siren", "--out", out.to_str().unwrap(), "--size", "24", "--style-size", "32",
-        "--fit-steps", "40", "--stylize-steps", "20", "--hidden", "64", "--depth", "3",
-        "--patch", "24", "--stride", "1", "--fit-batch", "576", "--lr-stylize", "2e-4",
-        "--checkpoint-every", "4", "--quiet", "--backend", "flex",
+        "train",
+        "siren",
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "24",
+        "--style-size",
+        "32",
+        "--fit-steps",
+        "40",
+        "--stylize-steps",
+        "20",
+        "--hidden",
+        "64",
+        "--depth",
+        "3",
+        "--patch",
+        "24",
+        "--stride",
+        "1",
+        "--fit-batch",
+        "576",
+        "--lr-stylize",
+        "2e-4",
+        "--checkpoint-every",
+        "4",
+        "--quiet",
+        "--backend",
+        "flex",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -53,8 +78,13 @@ fn parameters<M: Module>(m: &M) -> Vec<f32> {
     struct All(Vec<f32>);
     impl ModuleVisitor for All {
         fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0
-                .extend(p.val().into_data().convert::<f32>().try_to_vec::<f32>().unwrap());
+            self.0.extend(
+                p.val()
+                    .into_data()
+                    .convert::<f32>()
+                    .try_to_vec::<f32>()
+                    .unwrap(),
+            );
         }
     }
     let mut v = All(Vec::new());
@@ -70,7 +100,11 @@ fn assert_latest_complete(run: &Path) {
     };
     let dir = ck.join(name.trim());
     for f in ["model.bpk", "optim.bpk", "state.json"] {
-        assert!(dir.join(f).is_file(), "latest names {} without {f}", dir.display());
+        assert!(
+            dir.join(f).is_file(),
+            "latest names {} without {f}",
+            dir.display()
+        );
     }
 }
 
@@ -171,12 +205,19 @@ fn killed_runs_resume_to_the_same_parameters_as_an_uninterrupted_one() {
         .zip(&pb)
         .map(|(x, y)| (x - y).abs())
         .fold(0.0f32, f32::max);
-    assert!(diff <= 1e-5, "resumed run ends {diff} away from the uninterrupted one");
+    assert!(
+        diff <= 1e-5,
+        "resumed run ends {diff} away from the uninterrupted one"
+    );
     // The resumed run's metrics cover every step once, in order.
     let log = std::fs::read_to_string(b.join("metrics.jsonl")).unwrap();
     let steps: Vec<u64> = log
         .lines()
-        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["step"].as_u64().unwrap())
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["step"]
+                .as_u64()
+                .unwrap()
+        })
         .collect();
     let mut sorted = steps.clone();
     sorted.sort();

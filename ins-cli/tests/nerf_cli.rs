@@ -37,51 +37,136 @@ fn s(p: &Path) -> &str {
 
 /// A tiny grid pretraining run on a synthetic Blender scene.
 const TINY: &[&str] = &[
-    "--steps", "40", "--target-samples", "8192", "--log2-table", "12", "--max-resolution", "64",
-    "--occupancy-resolution", "16", "--eval-every", "20", "--eval-views", "1",
-    "--checkpoint-every", "20", "--quiet", "--backend", "flex",
+    "--steps",
+    "40",
+    "--target-samples",
+    "8192",
+    "--log2-table",
+    "12",
+    "--max-resolution",
+    "64",
+    "--occupancy-resolution",
+    "16",
+    "--eval-every",
+    "20",
+    "--eval-views",
+    "1",
+    "--checkpoint-every",
+    "20",
+    "--quiet",
+    "--backend",
+    "flex",
 ];
 
 #[test]
 fn pretrain_render_eval_stylize_and_refuse_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene");
-    ok(cli(&["data", "synth", "--format", "blender", "--out", s(&scene), "--size", "24", "--views", "6"]));
+    ok(cli(&[
+        "data",
+        "synth",
+        "--format",
+        "blender",
+        "--out",
+        s(&scene),
+        "--size",
+        "24",
+        "--views",
+        "6",
+    ]));
     let run = dir.path().join("run");
     let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
     args.extend_from_slice(TINY);
     let o = ok(cli(&args));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary["steps"], 40);
-    for f in ["config.json", "metrics.jsonl", "loss_curve.png", "val/step_000020.png", "val/final.png"] {
+    for f in [
+        "config.json",
+        "metrics.jsonl",
+        "loss_curve.png",
+        "val/step_000020.png",
+        "val/final.png",
+    ] {
         assert!(run.join(f).exists(), "missing {f}");
     }
     let log = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
-    assert!(log.contains("val_psnr") && log.contains("val_ssim"), "{log}");
+    assert!(
+        log.contains("val_psnr") && log.contains("val_ssim"),
+        "{log}"
+    );
 
     // Render: one view, a split as a folder, a turntable as a GIF, depth, another size.
     let png = dir.path().join("view.png");
-    ok(cli(&["render", "nerf", "--run", s(&run), "--view", "0", "--out", s(&png)]));
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--view",
+        "0",
+        "--out",
+        s(&png),
+    ]));
     assert_eq!(image::open(&png).unwrap().width(), 24);
     let big = dir.path().join("big.png");
-    ok(cli(&["render", "nerf", "--run", s(&run), "--view", "0", "--size", "40x30", "--depth", "--out", s(&big)]));
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--view",
+        "0",
+        "--size",
+        "40x30",
+        "--depth",
+        "--out",
+        s(&big),
+    ]));
     let img = image::open(&big).unwrap();
     assert_eq!((img.width(), img.height()), (40, 30));
     let frames = dir.path().join("val_frames");
-    ok(cli(&["render", "nerf", "--run", s(&run), "--split", "val", "--out", s(&frames)]));
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--split",
+        "val",
+        "--out",
+        s(&frames),
+    ]));
     assert!(std::fs::read_dir(&frames).unwrap().count() >= 1);
     let gif = dir.path().join("turn.gif");
-    ok(cli(&["render", "nerf", "--run", s(&run), "--path", "turntable", "--frames", "4", "--out", s(&gif)]));
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--path",
+        "turntable",
+        "--frames",
+        "4",
+        "--out",
+        s(&gif),
+    ]));
     let bytes = std::fs::read(&gif).unwrap();
     assert_eq!(&bytes[..6], b"GIF89a");
-    let frames_in_gif = image::codecs::gif::GifDecoder::new(std::io::Cursor::new(&bytes)).map(|d| {
-        use image::AnimationDecoder;
-        d.into_frames().count()
-    });
+    let frames_in_gif =
+        image::codecs::gif::GifDecoder::new(std::io::Cursor::new(&bytes)).map(|d| {
+            use image::AnimationDecoder;
+            d.into_frames().count()
+        });
     assert_eq!(frames_in_gif.unwrap(), 4);
 
     // Evaluate: one JSON line per held-out view, then the mean.
-    let o = ok(cli(&["eval", "nerf", "--run", s(&run), "--backend", "flex"]));
+    let o = ok(cli(&[
+        "eval",
+        "nerf",
+        "--run",
+        s(&run),
+        "--backend",
+        "flex",
+    ]));
     let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout)
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
@@ -92,44 +177,170 @@ fn pretrain_render_eval_stylize_and_refuse_bad_input() {
 
     // Stylize with the generated demo painting, then render a mix and evaluate depth.
     let style = dir.path().join("style.png");
-    image::RgbImage::from_fn(32, 32, |x, y| image::Rgb([(x * 8) as u8, (y * 8) as u8, 200])).save(&style).unwrap();
+    image::RgbImage::from_fn(32, 32, |x, y| {
+        image::Rgb([(x * 8) as u8, (y * 8) as u8, 200])
+    })
+    .save(&style)
+    .unwrap();
     let st = dir.path().join("stylized");
     ok(cli(&[
-        "train", "nerf", "--from", s(&run), "--style", s(&style), "--style", s(&style), "--out", s(&st),
-        "--steps", "4", "--patch", "12", "--stride", "1", "--style-size", "32", "--eval-every", "0",
-        "--quiet", "--backend", "flex",
+        "train",
+        "nerf",
+        "--from",
+        s(&run),
+        "--style",
+        s(&style),
+        "--style",
+        s(&style),
+        "--out",
+        s(&st),
+        "--steps",
+        "4",
+        "--patch",
+        "12",
+        "--stride",
+        "1",
+        "--style-size",
+        "32",
+        "--eval-every",
+        "0",
+        "--quiet",
+        "--backend",
+        "flex",
     ]));
     let mix = dir.path().join("mix.png");
-    ok(cli(&["render", "nerf", "--run", s(&st), "--view", "0", "--mix", "0.5,0.5", "--out", s(&mix)]));
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&st),
+        "--view",
+        "0",
+        "--mix",
+        "0.5,0.5",
+        "--out",
+        s(&mix),
+    ]));
     let o = ok(cli(&["eval", "nerf", "--run", s(&st), "--backend", "flex"]));
     assert!(String::from_utf8_lossy(&o.stdout).contains("depth_rel_error_median"));
 
     // Bad input, each named.
-    let o = cli(&["render", "nerf", "--run", s(&st), "--view", "0", "--mix", "1,0,0", "--out", s(&mix)]);
+    let o = cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&st),
+        "--view",
+        "0",
+        "--mix",
+        "1,0,0",
+        "--out",
+        s(&mix),
+    ]);
     assert_clean_failure(&o, "3 weights");
-    let o = cli(&["render", "nerf", "--run", s(&run), "--view", "0", "--mix", "1", "--out", s(&mix)]);
+    let o = cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--view",
+        "0",
+        "--mix",
+        "1",
+        "--out",
+        s(&mix),
+    ]);
     assert_clean_failure(&o, "not a stylized run");
     let bad_style = dir.path().join("broken.jpg");
     std::fs::write(&bad_style, b"\xff\xd8\xff\xe0 not really a jpeg").unwrap();
-    let o = cli(&["train", "nerf", "--from", s(&run), "--style", s(&bad_style), "--out", s(&dir.path().join("x")), "--steps", "2", "--quiet"]);
+    let o = cli(&[
+        "train",
+        "nerf",
+        "--from",
+        s(&run),
+        "--style",
+        s(&bad_style),
+        "--out",
+        s(&dir.path().join("x")),
+        "--steps",
+        "2",
+        "--quiet",
+    ]);
     assert_clean_failure(&o, "broken.jpg");
-    let o = cli(&["train", "nerf", "--from", s(&run), "--style", s(&style), "--cim", "mlp", "--out", s(&dir.path().join("y")), "--steps", "2", "--quiet"]);
+    let o = cli(&[
+        "train",
+        "nerf",
+        "--from",
+        s(&run),
+        "--style",
+        s(&style),
+        "--cim",
+        "mlp",
+        "--out",
+        s(&dir.path().join("y")),
+        "--steps",
+        "2",
+        "--quiet",
+    ]);
     assert_clean_failure(&o, "does not match the pretrained run");
     let siren_like = dir.path().join("notnerf");
     std::fs::create_dir_all(&siren_like).unwrap();
-    std::fs::write(siren_like.join("config.json"), br#"{"content": "a.png", "styles": ["b.png"]}"#).unwrap();
-    let o = cli(&["render", "nerf", "--run", s(&siren_like), "--view", "0", "--out", s(&mix)]);
+    std::fs::write(
+        siren_like.join("config.json"),
+        br#"{"content": "a.png", "styles": ["b.png"]}"#,
+    )
+    .unwrap();
+    let o = cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&siren_like),
+        "--view",
+        "0",
+        "--out",
+        s(&mix),
+    ]);
     assert_clean_failure(&o, "not a NeRF run");
-    let o = cli(&["train", "nerf", "--scene", s(&scene), "--cim", "voxels", "--out", s(&dir.path().join("z"))]);
+    let o = cli(&[
+        "train",
+        "nerf",
+        "--scene",
+        s(&scene),
+        "--cim",
+        "voxels",
+        "--out",
+        s(&dir.path().join("z")),
+    ]);
     assert_clean_failure(&o, "voxels");
     // A scene without training views.
     let empty = dir.path().join("empty");
     std::fs::create_dir_all(&empty).unwrap();
-    std::fs::write(empty.join("transforms_train.json"), br#"{"camera_angle_x": 0.7, "frames": []}"#).unwrap();
-    let o = cli(&["train", "nerf", "--scene", s(&empty), "--out", s(&dir.path().join("w")), "--quiet"]);
-    assert_clean_failure(&o, "no training views");
+    std::fs::write(
+        empty.join("transforms_train.json"),
+        br#"{"camera_angle_x": 0.7, "frames": []}"#,
+    )
+    .unwrap();
+    let o = cli(&[
+        "train",
+        "nerf",
+        "--scene",
+        s(&empty),
+        "--out",
+        s(&dir.path().join("w")),
+        "--quiet",
+    ]);
+    assert_clean_failure(&o, "transforms_train.json: no frames");
     // Nothing was written over: the pretrained run still renders.
-    ok(cli(&["render", "nerf", "--run", s(&run), "--view", "0", "--out", s(&png)]));
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--view",
+        "0",
+        "--out",
+        s(&png),
+    ]));
 }
 
 #[test]
@@ -137,8 +348,24 @@ fn config_files_with_unknown_fields_are_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("cfg.json");
     std::fs::write(&cfg, br#"{"steps": 3, "occupancy_resolutoin": 64}"#).unwrap();
-    let o = cli(&["train", "nerf", "--scene", "/x", "--config", s(&cfg), "--out", s(&dir.path().join("r"))]);
+    let o = cli(&[
+        "train",
+        "nerf",
+        "--scene",
+        "/x",
+        "--config",
+        s(&cfg),
+        "--out",
+        s(&dir.path().join("r")),
+    ]);
     assert_clean_failure(&o, "occupancy_resolutoin");
-    let o = cli(&["train", "siren", "--config", s(&cfg), "--out", s(&dir.path().join("r2"))]);
+    let o = cli(&[
+        "train",
+        "siren",
+        "--config",
+        s(&cfg),
+        "--out",
+        s(&dir.path().join("r2")),
+    ]);
     assert_clean_failure(&o, "unknown field");
 }

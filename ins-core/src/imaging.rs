@@ -158,15 +158,43 @@ pub fn turbo(t: f32) -> [f32; 3] {
         (c[0] + t * (c[1] + t * (c[2] + t * (c[3] + t * (c[4] + t * c[5]))))).clamp(0.0, 1.0) as f32
     };
     [
-        poly([0.135_721_38, 4.615_392_6, -42.660_322_57, 132.131_082_34, -152.942_393_97, 59.286_379_16]),
-        poly([0.091_402_61, 2.194_188_39, 4.842_966_58, -14.185_033_33, 4.277_298_57, 2.829_566_04]),
-        poly([0.106_673_3, 12.641_946_08, -60.582_048_36, 110.362_767_71, -89.903_109_12, 27.348_249_81]),
+        poly([
+            0.135_721_38,
+            4.615_392_6,
+            -42.660_322_57,
+            132.131_082_34,
+            -152.942_393_97,
+            59.286_379_16,
+        ]),
+        poly([
+            0.091_402_61,
+            2.194_188_39,
+            4.842_966_58,
+            -14.185_033_33,
+            4.277_298_57,
+            2.829_566_04,
+        ]),
+        poly([
+            0.106_673_3,
+            12.641_946_08,
+            -60.582_048_36,
+            110.362_767_71,
+            -89.903_109_12,
+            27.348_249_81,
+        ]),
     ]
 }
 
 /// A depth map as a picture: `depth` divided by `opacity` where the opacity is above 0.5,
 /// mapped from `[near, far]` onto the turbo colours; transparent pixels are white.
-pub fn depth_image(depth: &[f32], opacity: &[f32], width: usize, height: usize, near: f32, far: f32) -> RgbImage {
+pub fn depth_image(
+    depth: &[f32],
+    opacity: &[f32],
+    width: usize,
+    height: usize,
+    near: f32,
+    far: f32,
+) -> RgbImage {
     let mut data = Vec::with_capacity(width * height * 3);
     let span = (far - near).max(1e-6);
     for (d, o) in depth.iter().zip(opacity) {
@@ -176,5 +204,9 @@ pub fn depth_image(depth: &[f32], opacity: &[f32], width: usize, height: usize, 
             data.extend([1.0, 1.0, 1.0]);
         }
     }
-    RgbImage { width, height, data }
+    RgbImage {
+        width,
+        height,
+        data,
+    }
 }

@@ -5,6 +5,7 @@
 //! [`backend`] picks the compute device at run time; [`imaging`] turns tensors into pictures.
 
 pub mod backend;
+pub mod contain;
 pub mod data;
 pub mod imaging;
 pub mod loss;

@@ -83,7 +83,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
 /// Like [`write_atomic`], for writers that produce the file themselves (an image encoder, a
 /// zip writer): `write` must create the file at the path it is given. The file is synced, then
 /// renamed over `path`.
-pub fn write_atomic_with<E>(path: &Path, write: impl FnOnce(&Path) -> Result<(), E>) -> Result<(), E>
+pub fn write_atomic_with<E>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), E>
 where
     E: From<IoError>,
 {

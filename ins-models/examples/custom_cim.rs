@@ -12,9 +12,9 @@ use ins_core::modules::cim::ContentModule;
 use ins_core::modules::ins::Ins;
 use ins_core::modules::mlp::{ReluMlp, ReluMlpConfig};
 use ins_core::modules::sim::SimConfig;
+use ins_core::render::patches::PatchSpec;
 use ins_core::train::{Phase, TrainOptions, Trainer};
 use ins_models::demo::{demo_content, demo_style};
-use ins_core::render::patches::PatchSpec;
 use ins_models::image_task::{ImageObjective, ImageTask, ImageTaskFor, render_image};
 
 /// `x ↦ MLP([sin(2πBx), cos(2πBx)])` with a fixed random B.

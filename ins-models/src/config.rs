@@ -28,6 +28,28 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
     serde_json::from_str(&text).with_context(|| format!("{}: malformed config", path.display()))
 }
 
+/// Writes a run's `config.json` into `out`, or, resuming, checks that the run was started with
+/// the same configuration (a resumed run with other options would silently be another run).
+pub fn write_run_config<T>(cfg: &T, out: &Path, resume: bool) -> Result<()>
+where
+    T: Serialize + DeserializeOwned + PartialEq,
+{
+    let path = out.join("config.json");
+    if resume && path.exists() {
+        let saved: T = read_json(&path)?;
+        if saved != *cfg {
+            anyhow::bail!(
+                "{}: the run was started with another configuration; resume with the same options (or --config {})",
+                path.display(),
+                path.display()
+            );
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    ins_io::write_atomic(&path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
+    Ok(())
+}
+
 /// The configuration a command runs with: `cli` (parsed flags, defaults included) where a flag
 /// was given on the command line, the `file`'s value otherwise (or the default when the file
 /// does not set it).
@@ -44,9 +66,9 @@ where
         anyhow::bail!("config structs serialize to objects");
     };
     for (key, value) in flags {
-        let given = matches
-            .ids()
-            .any(|id| id.as_str() == key && matches.value_source(&key) == Some(ValueSource::CommandLine));
+        let given = matches.ids().any(|id| {
+            id.as_str() == key && matches.value_source(&key) == Some(ValueSource::CommandLine)
+        });
         if given {
             merged.insert(key, value);
         }
@@ -91,16 +113,37 @@ mod tests {
 
     #[test]
     fn flags_override_the_file_and_the_file_overrides_defaults() {
-        assert_eq!(Demo::default(), Demo { steps: 3, lr: 0.5, styles: vec![] });
+        assert_eq!(
+            Demo::default(),
+            Demo {
+                steps: 3,
+                lr: 0.5,
+                styles: vec![]
+            }
+        );
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("c.json");
         std::fs::write(&f, r#"{"steps": 7, "styles": ["a.png"]}"#).unwrap();
         let (cli, m) = parse(&["--lr", "0.1"]);
         let got = merge_with_file(cli, &m, Some(&f)).unwrap();
-        assert_eq!(got, Demo { steps: 7, lr: 0.1, styles: vec!["a.png".into()] });
+        assert_eq!(
+            got,
+            Demo {
+                steps: 7,
+                lr: 0.1,
+                styles: vec!["a.png".into()]
+            }
+        );
         let (cli, m) = parse(&["--steps", "2", "--style", "b.png"]);
         let got = merge_with_file(cli, &m, Some(&f)).unwrap();
-        assert_eq!(got, Demo { steps: 2, lr: 0.5, styles: vec!["b.png".into()] });
+        assert_eq!(
+            got,
+            Demo {
+                steps: 2,
+                lr: 0.5,
+                styles: vec!["b.png".into()]
+            }
+        );
     }
 
     #[test]

@@ -17,9 +17,9 @@ use ins_core::modules::cim::ContentModule;
 use ins_core::modules::ins::Ins;
 use ins_core::render::patches::PatchSpec;
 use ins_core::train::{LossTerms, StepContext, Task};
+use rand::Rng;
 use rand::SeedableRng;
 use rand::rngs::SmallRng;
-use rand::Rng;
 use serde::{Deserialize, Serialize};
 use vgg_import::Vgg;
 

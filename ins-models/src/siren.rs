@@ -187,19 +187,7 @@ pub fn train(
 ) -> Result<TrainOutcome<Ins<SirenCim>>> {
     let (content, styles) = load_images(cfg)?;
     let out = opts.out_dir.clone();
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let config_path = out.join("config.json");
-    if opts.resume && config_path.exists() {
-        let saved = SirenRunConfig::from_file(&config_path)?;
-        if saved != *cfg {
-            bail!(
-                "{}: the run was started with another configuration; resume with the same options (or --config {})",
-                config_path.display(),
-                config_path.display()
-            );
-        }
-    }
-    ins_io::write_atomic(&config_path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
+    crate::config::write_run_config(cfg, &out, opts.resume)?;
 
     let weights = cfg.weights(vgg.preprocess);
     let patch = PatchSpec::new(

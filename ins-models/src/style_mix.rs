@@ -27,7 +27,12 @@ pub fn normalized(n: usize, mix: Option<&[f32]>) -> Result<Vec<f32>> {
 
 /// The code `[1, n]` for a run with `n_styles` styles, or `None` for an unstylized run (where
 /// a mix is an error naming the run).
-pub fn code(n_styles: usize, mix: Option<&[f32]>, run: &Path, device: &Device) -> Result<Option<Tensor<2>>> {
+pub fn code(
+    n_styles: usize,
+    mix: Option<&[f32]>,
+    run: &Path,
+    device: &Device,
+) -> Result<Option<Tensor<2>>> {
     if n_styles == 0 {
         if mix.is_some() {
             bail!("--mix: {} is not a stylized run", run.display());
@@ -35,5 +40,7 @@ pub fn code(n_styles: usize, mix: Option<&[f32]>, run: &Path, device: &Device) -
         return Ok(None);
     }
     let code = normalized(n_styles, mix)?;
-    Ok(Some(Tensor::<1>::from_floats(code.as_slice(), device).reshape([1, n_styles])))
+    Ok(Some(
+        Tensor::<1>::from_floats(code.as_slice(), device).reshape([1, n_styles]),
+    ))
 }

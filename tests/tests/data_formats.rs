@@ -269,7 +269,9 @@ fn rays_follow_each_formats_own_definition() {
             );
             close(
                 rays.origins[k],
-                scene.to_scene.apply_point(Vec3::new(m(0, 3), m(1, 3), m(2, 3))),
+                scene
+                    .to_scene
+                    .apply_point(Vec3::new(m(0, 3), m(1, 3), m(2, 3))),
                 "llff origin",
             );
         }
@@ -362,7 +364,10 @@ fn llff_spiral_orbits_and_looks_at_the_focus_point() {
             "spiral camera misses the focus by {miss}"
         );
         assert!(orthonormality_error(cam.rotation()) < 1e-5);
-        max_offset = max_offset.max(dist(cam.origin(), Vec3::new(avg[0][3], avg[1][3], avg[2][3])));
+        max_offset = max_offset.max(dist(
+            cam.origin(),
+            Vec3::new(avg[0][3], avg[1][3], avg[2][3]),
+        ));
     }
     // It moves, within the spread of the real cameras.
     let spread = cams.iter().map(|c| norm(c.origin())).fold(0.0, f32::max);

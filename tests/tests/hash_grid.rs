@@ -21,7 +21,9 @@ fn shape() -> GridShape {
 fn inputs(device: &Device) -> (Tensor<2>, Tensor<2>, Tensor<2>, Tensor<3>) {
     let layout = shape().layout();
     let rows = layout.total_rows();
-    let table: Vec<f32> = (0..rows * 2).map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0).collect();
+    let table: Vec<f32> = (0..rows * 2)
+        .map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0)
+        .collect();
     // Points inside, on the boundary and outside the unit cube (clamped).
     let mut pos = Vec::new();
     for i in 0..61 {
@@ -29,8 +31,12 @@ fn inputs(device: &Device) -> (Tensor<2>, Tensor<2>, Tensor<2>, Tensor<3>) {
         pos.extend([f(0), f(1), f(2)]);
     }
     let n = pos.len() / 3;
-    let up: Vec<f32> = (0..n * 8).map(|i| ((i * 13 % 17) as f32 / 8.0) - 1.0).collect();
-    let upj: Vec<f32> = (0..n * 8 * 3).map(|i| ((i * 11 % 19) as f32 / 9.0) - 1.0).collect();
+    let up: Vec<f32> = (0..n * 8)
+        .map(|i| ((i * 13 % 17) as f32 / 8.0) - 1.0)
+        .collect();
+    let upj: Vec<f32> = (0..n * 8 * 3)
+        .map(|i| ((i * 11 % 19) as f32 / 9.0) - 1.0)
+        .collect();
     (
         Tensor::<1>::from_floats(pos.as_slice(), device).reshape([n, 3]),
         Tensor::<1>::from_floats(table.as_slice(), device).reshape([rows, 2]),
@@ -51,7 +57,10 @@ fn run(backend: BackendChoice, kernel: bool) -> Result_ {
     let device = backend.device().autodiff();
     let (p, t, up, upj) = inputs(&device);
     if kernel {
-        assert!(op::kernel_device(&device), "{backend} should run the kernel");
+        assert!(
+            op::kernel_device(&device),
+            "{backend} should run the kernel"
+        );
     }
     let p = p.require_grad();
     let t = t.require_grad();
@@ -81,7 +90,10 @@ fn run(backend: BackendChoice, kernel: bool) -> Result_ {
 
 fn assert_close(what: &str, a: &[f32], b: &[f32]) {
     let d = max_rel_diff(a, b, 1e-6);
-    assert!(d < 1e-5, "{what}: differs by {d} relative to the largest entry");
+    assert!(
+        d < 1e-5,
+        "{what}: differs by {d} relative to the largest entry"
+    );
 }
 
 #[test]
@@ -97,8 +109,16 @@ fn kernel_op_equals_the_reference_in_value_and_gradient_on_every_backend() {
     for (name, backend, kernel) in cases {
         let r = run(backend, kernel);
         assert_close(&format!("{name} encoding"), &r.encoding, &truth.encoding);
-        assert_close(&format!("{name} table gradient"), &r.grad_table, &truth.grad_table);
-        assert_close(&format!("{name} position gradient"), &r.grad_positions, &truth.grad_positions);
+        assert_close(
+            &format!("{name} table gradient"),
+            &r.grad_table,
+            &truth.grad_table,
+        );
+        assert_close(
+            &format!("{name} position gradient"),
+            &r.grad_positions,
+            &truth.grad_positions,
+        );
         assert_close(&format!("{name} Jacobian"), &r.jacobian, &truth.jacobian);
         assert_close(
             &format!("{name} Jacobian table gradient"),

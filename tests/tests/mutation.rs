@@ -154,7 +154,14 @@ fn fuzz(
                     t.unnamed.push(format!("mutant {i}: {msg}"));
                 }
             }
-            Err(_) => t.panics.push(format!("mutant {i}")),
+            Err(p) => {
+                let msg = p
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                t.panics.push(format!("mutant {i}: {msg}"));
+            }
         }
     }
     std::fs::write(target, original).unwrap();
@@ -171,10 +178,32 @@ fn check(label: &str, t: &Tally) {
         t.slow.len(),
         t.largest_alloc >> 10
     );
-    assert!(t.panics.is_empty(), "{label}: panics on {:?}", &t.panics[..t.panics.len().min(5)]);
-    assert!(t.unnamed.is_empty(), "{label}: errors not naming the file: {:?}", &t.unnamed[..t.unnamed.len().min(5)]);
+    // The panic hook is silenced while fuzzing, so say what failed before asserting.
+    for (what, list) in [
+        ("panics", &t.panics),
+        ("unnamed", &t.unnamed),
+        ("slow", &t.slow),
+    ] {
+        for item in list.iter().take(5) {
+            eprintln!("  {label} {what}: {item}");
+        }
+    }
+    assert!(
+        t.panics.is_empty(),
+        "{label}: panics on {:?}",
+        &t.panics[..t.panics.len().min(5)]
+    );
+    assert!(
+        t.unnamed.is_empty(),
+        "{label}: errors not naming the file: {:?}",
+        &t.unnamed[..t.unnamed.len().min(5)]
+    );
     assert!(t.slow.is_empty(), "{label}: slow inputs: {:?}", t.slow);
-    assert!(t.largest_alloc <= ALLOC_CAP, "{label}: allocated {} bytes at once", t.largest_alloc);
+    assert!(
+        t.largest_alloc <= ALLOC_CAP,
+        "{label}: allocated {} bytes at once",
+        t.largest_alloc
+    );
     assert_eq!(t.ok + t.errors, MUTANTS);
 }
 
@@ -242,7 +271,9 @@ fn png_and_jpeg_images() {
         let p = dir.path().join(name);
         img.save(&p).unwrap();
         run(name, &p, name, &|p| {
-            ins_core::data::images::read_image(p).map(|_| ()).map_err(err)
+            ins_core::data::images::read_image(p)
+                .map(|_| ())
+                .map_err(err)
         });
     }
 }
@@ -257,7 +288,9 @@ fn blender_transforms() {
     write_blender(dir.path(), &tiny()).unwrap();
     let p = dir.path().join("transforms_train.json");
     run("blender json", &p, "transforms_train.json", &|_| {
-        Scene::load(dir.path(), &LoadOptions::default()).map(|_| ()).map_err(err)
+        Scene::load(dir.path(), &LoadOptions::default())
+            .map(|_| ())
+            .map_err(err)
     });
 }
 
@@ -267,7 +300,9 @@ fn llff_poses_bounds() {
     write_llff(dir.path(), &tiny()).unwrap();
     let p = dir.path().join("poses_bounds.npy");
     run("llff npy", &p, "poses_bounds.npy", &|_| {
-        Scene::load(dir.path(), &LoadOptions::default()).map(|_| ()).map_err(err)
+        Scene::load(dir.path(), &LoadOptions::default())
+            .map(|_| ())
+            .map_err(err)
     });
 }
 
@@ -277,7 +312,9 @@ fn dtu_cameras() {
     write_dtu(dir.path(), &tiny()).unwrap();
     let p = dir.path().join("cameras.npz");
     run("dtu npz", &p, "cameras.npz", &|_| {
-        Scene::load(dir.path(), &LoadOptions::default()).map(|_| ()).map_err(err)
+        Scene::load(dir.path(), &LoadOptions::default())
+            .map(|_| ())
+            .map_err(err)
     });
 }
 
@@ -288,7 +325,9 @@ fn run_configs() {
     let cfg = ins_tests::small_config("c.png".into(), vec!["s.png".into()], 32);
     std::fs::write(&p, serde_json::to_string_pretty(&cfg).unwrap()).unwrap();
     run("siren config", &p, "config.json", &|p| {
-        ins_models::siren::SirenRunConfig::from_file(p).map(|_| ()).map_err(err)
+        ins_models::siren::SirenRunConfig::from_file(p)
+            .map(|_| ())
+            .map_err(err)
     });
 }
 
@@ -317,6 +356,37 @@ fn checkpoints() {
             .map_err(err)
     };
     for file in ["model.bpk", "state.json"] {
-        run(&format!("checkpoint {file}"), &ckpt_dir.join(file), file, &load);
+        run(
+            &format!("checkpoint {file}"),
+            &ckpt_dir.join(file),
+            file,
+            &load,
+        );
     }
+}
+
+#[test]
+fn optimizer_state() {
+    // A real Adam state: two fitting steps of a small SIREN run, checkpointed.
+    let device = Device::flex();
+    let dir = tempfile::tempdir().unwrap();
+    let content = ins_tests::save_image(dir.path(), "c.png", &ins_models::demo::demo_content(16));
+    let style = ins_tests::save_image(dir.path(), "s.png", &ins_models::demo::demo_style(16));
+    let cfg = ins_tests::small_config(content, vec![style], 16);
+    let run_dir = dir.path().join("run");
+    let mut o = ins_tests::quiet_options(&run_dir);
+    o.checkpoint_every = 2;
+    o.stop_after = Some(2);
+    ins_models::siren::train(&cfg, ins_tests::real_vgg(&device), &device, o).unwrap();
+    let ckpt_dir = CheckpointStore::new(&run_dir.join("checkpoints"), 2)
+        .latest_dir()
+        .unwrap()
+        .expect("a checkpoint after two steps");
+    let p = ckpt_dir.join("optim.bpk");
+    run("checkpoint optim.bpk", &p, "optim.bpk", &|p| {
+        let bytes = std::fs::read(p).map_err(err)?;
+        ins_core::train::trainer::restore_adam(bytes, p)
+            .map(|_| ())
+            .map_err(err)
+    });
 }

@@ -17,7 +17,7 @@ fn tiny(scene: &std::path::Path) -> NerfRunConfig {
     NerfRunConfig {
         scene: Some(scene.to_path_buf()),
         downscale: 1,
-        steps: 400,
+        steps: 600,
         target_samples: 1 << 14,
         log2_table: 14,
         max_resolution: 128,
@@ -65,7 +65,14 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     let device = Device::flex();
     let dir = tempfile::tempdir().unwrap();
     let scene_dir = dir.path().join("scene");
-    write_blender(&scene_dir, &SynthOptions { size: 48, views: 16 }).unwrap();
+    write_blender(
+        &scene_dir,
+        &SynthOptions {
+            size: 48,
+            views: 16,
+        },
+    )
+    .unwrap();
     let run_dir = dir.path().join("pretrained");
     let cfg = tiny(&scene_dir);
     let out = pretrain(&cfg, &device, quiet_options(&run_dir)).unwrap();
@@ -73,11 +80,45 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     assert!(run_dir.join("val/final.png").exists());
     let run = NerfRun::load(&run_dir, &device).unwrap();
     let views = heldout_views(&run.scene);
-    let evals = evaluate_views(&run.model.valid(), &run.scene, &views, run.sampling(), None, run.background(), &device).unwrap();
+    let evals = evaluate_views(
+        &run.model.valid(),
+        &run.scene,
+        &views,
+        run.sampling(),
+        None,
+        run.background(),
+        &device,
+    )
+    .unwrap();
     let psnr = evals.iter().map(|e| e.psnr).sum::<f64>() / evals.len() as f64;
-    assert!(psnr > 24.0, "held-out PSNR after pretraining: {psnr:.2} dB");
+    // The reference: the best constant colour over the same views (what a field that learned
+    // nothing but the mean colour would score).
+    let n = evals.iter().map(|e| e.photo.len() / 3).sum::<usize>() as f64;
+    let mean: [f64; 3] = std::array::from_fn(|c| {
+        evals
+            .iter()
+            .flat_map(|e| e.photo.iter().skip(c).step_by(3))
+            .map(|&v| v as f64)
+            .sum::<f64>()
+            / n
+    });
+    let se: f64 = evals
+        .iter()
+        .flat_map(|e| e.photo.chunks(3))
+        .map(|p| (0..3).map(|c| (p[c] as f64 - mean[c]).powi(2)).sum::<f64>())
+        .sum();
+    let psnr_constant = ins_core::loss::psnr(se / (3.0 * n));
+    eprintln!("held-out PSNR {psnr:.2} dB (constant colour: {psnr_constant:.2} dB)");
+    assert!(
+        psnr > psnr_constant + 8.0,
+        "held-out PSNR after pretraining {psnr:.2} dB is not clearly above a constant colour's {psnr_constant:.2} dB"
+    );
     let grid = run.grid.as_ref().unwrap();
-    assert!(grid.occupancy() < 0.5, "the occupancy grid did not prune: {}", grid.occupancy());
+    assert!(
+        grid.occupancy() < 0.5,
+        "the occupancy grid did not prune: {}",
+        grid.occupancy()
+    );
 
     // Stylize with stripes.
     let style = save_image(dir.path(), "stripes.png", &stripes(64));
@@ -100,12 +141,52 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     assert_eq!(st.model.n_styles(), 1);
     let view = &st.scene.views[views[0]].camera;
     let code = st.code(None, &device).unwrap();
-    let before = render_camera(&run.model.valid(), &run.scene, view, run.sampling(), None, run.background(), &device).unwrap();
-    let after = render_camera(&st.model.valid(), &st.scene, view, st.sampling(), code, st.background(), &device).unwrap();
+    let before = render_camera(
+        &run.model.valid(),
+        &run.scene,
+        view,
+        run.sampling(),
+        None,
+        run.background(),
+        &device,
+    )
+    .unwrap();
+    let after = render_camera(
+        &st.model.valid(),
+        &st.scene,
+        view,
+        st.sampling(),
+        code,
+        st.background(),
+        &device,
+    )
+    .unwrap();
     // The colours moved towards the painting...
     let target = StyleTarget::from_image(&vgg, stripes(64).to_tensor(&device)).grams;
-    let d = |img: RgbImage| style_loss(&vgg.features(img.to_tensor(&device)), &target).into_scalar::<f32>();
-    let (d0, d1) = (d(before.image()), d(after.image()));
+    let d = |img: RgbImage| {
+        style_loss(&vgg.features(img.to_tensor(&device)), &target).into_scalar::<f32>()
+    };
+    // Measured on the object's bounding box (opaque pixels of the pretrained render), so the
+    // white background does not dominate the Gram matrices.
+    let crop = |img: RgbImage| {
+        let w = img.width;
+        let (mut x0, mut y0, mut x1, mut y1) = (w, img.height, 0, 0);
+        for (i, _) in before.opacity.iter().enumerate().filter(|(_, o)| **o > 0.5) {
+            let (x, y) = (i % w, i / w);
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+        }
+        let mut data = Vec::new();
+        for y in y0..y1 {
+            data.extend_from_slice(&img.data[(y * w + x0) * 3..(y * w + x1) * 3]);
+        }
+        RgbImage {
+            width: x1 - x0,
+            height: y1 - y0,
+            data,
+        }
+    };
+    let (d0, d1) = (d(crop(before.image())), d(crop(after.image())));
+    eprintln!("style distance on the object's box {d0} → {d1}");
     assert!(d1 < 0.5 * d0, "style distance {d0} → {d1}");
     // ...and the geometry did not.
     let err = median_depth_error(&after, &before);
@@ -129,15 +210,35 @@ fn mlp_nerf_trains_and_renders() {
         ..tiny(&scene_dir)
     };
     let out = pretrain(&cfg, &device, quiet_options(&run_dir)).unwrap();
-    assert!(out.last["mse"] < out.last["mse_coarse"].max(0.2), "{:?}", out.last);
+    assert!(
+        out.last["mse"] < out.last["mse_coarse"].max(0.2),
+        "{:?}",
+        out.last
+    );
     let log = std::fs::read_to_string(run_dir.join("metrics.jsonl")).unwrap();
     let mse: Vec<f64> = log
         .lines()
-        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["mse"].as_f64().unwrap())
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["mse"]
+                .as_f64()
+                .unwrap()
+        })
         .collect();
-    assert!(mse.last().unwrap() < mse.first().unwrap(), "MSE did not fall: {mse:?}");
+    assert!(
+        mse.last().unwrap() < mse.first().unwrap(),
+        "MSE did not fall: {mse:?}"
+    );
     let run = NerfRun::load(&run_dir, &device).unwrap();
     assert!(run.model.coarse.is_some());
-    let r = render_camera(&run.model.valid(), &run.scene, &run.scene.views[0].camera, run.sampling(), None, run.background(), &device).unwrap();
+    let r = render_camera(
+        &run.model.valid(),
+        &run.scene,
+        &run.scene.views[0].camera,
+        run.sampling(),
+        None,
+        run.background(),
+        &device,
+    )
+    .unwrap();
     assert_eq!(r.rgb.len(), 16 * 16 * 3);
 }

@@ -100,7 +100,10 @@ fn nan_stops_with_a_typed_error_and_keeps_the_last_good_checkpoint() {
         nan_from: 5,
         global: 0,
     };
-    let err = t.run(&mut nan, toy(&device)).err().expect("NaN must stop the run");
+    let err = t
+        .run(&mut nan, toy(&device))
+        .err()
+        .expect("NaN must stop the run");
     let TrainError::Diverged {
         term,
         step,
@@ -111,10 +114,19 @@ fn nan_stops_with_a_typed_error_and_keeps_the_last_good_checkpoint() {
         panic!("expected Diverged, got {err}");
     };
     assert_eq!((term.as_str(), *step), ("mse", 5));
-    let checkpoint = checkpoint.clone().expect("a checkpoint was written at step 4");
-    assert!(checkpoint.ends_with("step-00000004-000"), "{}", checkpoint.display());
+    let checkpoint = checkpoint
+        .clone()
+        .expect("a checkpoint was written at step 4");
+    assert!(
+        checkpoint.ends_with("step-00000004-000"),
+        "{}",
+        checkpoint.display()
+    );
     let msg = err.to_string();
-    assert!(msg.contains("diverged") && msg.contains("step-00000004-000"), "{msg}");
+    assert!(
+        msg.contains("diverged") && msg.contains("step-00000004-000"),
+        "{msg}"
+    );
     // The checkpoint it names is complete and loads.
     let ckpt = CheckpointStore::load_dir(&checkpoint).unwrap();
     assert_eq!(ckpt.step, 4);
@@ -132,7 +144,11 @@ fn frozen_group_keeps_its_parameters_and_lr_multiplier_scales_steps() {
     let t = Trainer::new(vec![fit(5, 1e-2).freeze("a")], quiet(dir.path()));
     let out = t.run(&mut task(), start).unwrap();
     assert_eq!(values(out.model.a.weight.val()), a0, "frozen group moved");
-    assert_ne!(values(out.model.b.weight.val()), b0, "trained group did not move");
+    assert_ne!(
+        values(out.model.b.weight.val()),
+        b0,
+        "trained group did not move"
+    );
 
     // Adam moves each parameter by about lr on its first step: with a multiplier of 0.1 the
     // first step moves `a` by 1e-3.
@@ -150,8 +166,14 @@ fn frozen_group_keeps_its_parameters_and_lr_multiplier_scales_steps() {
     };
     let ma = moved(values(out.model.a.weight.val()), &a0);
     let mb = moved(values(out.model.b.weight.val()), &b0);
-    assert!((ma - 1e-3).abs() < 2e-4, "first Adam step with lr 1e-2 × 0.1 moved {ma}");
-    assert!((mb - 1e-2).abs() < 2e-3, "first Adam step with lr 1e-2 moved {mb}");
+    assert!(
+        (ma - 1e-3).abs() < 2e-4,
+        "first Adam step with lr 1e-2 × 0.1 moved {ma}"
+    );
+    assert!(
+        (mb - 1e-2).abs() < 2e-3,
+        "first Adam step with lr 1e-2 moved {mb}"
+    );
 }
 
 #[test]
@@ -165,10 +187,16 @@ fn misconfigured_phases_are_refused_before_any_step() {
             .expect("must be refused")
     };
     let e = run(fit(3, 1e-2).freeze("c"));
-    assert!(matches!(&e, TrainError::UnknownGroup { group, .. } if group == "c"), "{e}");
+    assert!(
+        matches!(&e, TrainError::UnknownGroup { group, .. } if group == "c"),
+        "{e}"
+    );
     assert!(e.to_string().contains("groups: a, b"), "{e}");
     let e = run(fit(3, 1e-2).weight("msee", 1.0));
-    assert!(matches!(&e, TrainError::UnknownTerm { term, .. } if term == "msee"), "{e}");
+    assert!(
+        matches!(&e, TrainError::UnknownTerm { term, .. } if term == "msee"),
+        "{e}"
+    );
     let e = run(fit(3, 1e-2).weight("mse", 0.0));
     assert!(matches!(&e, TrainError::NothingToMinimise { .. }), "{e}");
     // Nothing was written: the folder holds no run.

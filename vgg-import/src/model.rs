@@ -168,9 +168,18 @@ mod tests {
         let grads = loss.backward();
         assert!(x.grad(&grads).is_some(), "no gradient reached the input");
         for (i, c) in vgg.convs.iter().enumerate() {
-            assert!(!c.weight.val().is_require_grad(), "conv {i} weight requires grad");
-            assert!(c.weight.val().grad(&grads).is_none(), "conv {i} weight got a gradient");
-            assert!(c.bias.val().grad(&grads).is_none(), "conv {i} bias got a gradient");
+            assert!(
+                !c.weight.val().is_require_grad(),
+                "conv {i} weight requires grad"
+            );
+            assert!(
+                c.weight.val().grad(&grads).is_none(),
+                "conv {i} weight got a gradient"
+            );
+            assert!(
+                c.bias.val().grad(&grads).is_none(),
+                "conv {i} bias got a gradient"
+            );
         }
     }
 }

@@ -211,10 +211,18 @@ fn read_transforms(path: &Path, dir: &Path) -> Result<(Intrinsics, Vec<Frame>), 
                 format!("frame {i}: transform_matrix is not a 4×4 array of numbers"),
             )
         })?;
-        frames.push(Frame {
-            image: resolve_image(dir, file),
-            c2w,
-        });
+        let image = resolve_image(dir, file);
+        if !image.is_file() {
+            let name = path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            return Err(DataError::missing(
+                &image,
+                format!("the image of frame {i} in {name} does not exist"),
+            ));
+        }
+        frames.push(Frame { image, c2w });
     }
     Ok((Intrinsics { fov_x, fl, c }, frames))
 }

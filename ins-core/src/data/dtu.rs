@@ -280,10 +280,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
             depth_range: None,
         });
     }
-    let dists: Vec<f32> = views
-        .iter()
-        .map(|v| v.camera.origin().length())
-        .collect();
+    let dists: Vec<f32> = views.iter().map(|v| v.camera.origin().length()).collect();
     let near = dists.iter().fold(f32::INFINITY, |a, &d| a.min(d)) - 1.0;
     let far = dists.iter().fold(0.0f32, |a, &d| a.max(d)) + 1.0;
     Ok(Scene {

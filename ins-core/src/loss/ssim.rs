@@ -50,7 +50,8 @@ pub fn ssim(a: &[f32], b: &[f32], width: usize, height: usize) -> f64 {
             let va = aa[i] - ma * ma;
             let vb = bb[i] - mb * mb;
             let cov = ab[i] - ma * mb;
-            total += ((2.0 * ma * mb + c1) * (2.0 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2));
+            total += ((2.0 * ma * mb + c1) * (2.0 * cov + c2))
+                / ((ma * ma + mb * mb + c1) * (va + vb + c2));
             count += 1;
         }
     }
@@ -75,7 +76,9 @@ mod tests {
 
     #[test]
     fn identical_images_score_one_and_noise_scores_less() {
-        let a = image(32, 24, |x, y, c| ((x * 7 + y * 3 + c * 5) % 17) as f32 / 16.0);
+        let a = image(32, 24, |x, y, c| {
+            ((x * 7 + y * 3 + c * 5) % 17) as f32 / 16.0
+        });
         assert!((ssim(&a, &a, 32, 24) - 1.0).abs() < 1e-12);
         // Independent noise of ±0.2 per value (a fixed hash, not a pattern of the image).
         let noisy: Vec<f32> = a

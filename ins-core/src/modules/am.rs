@@ -73,7 +73,10 @@ mod tests {
             let style = Tensor::<2>::random([10, 4], Distribution::Normal(s as f64, 1.0), &d);
             let out = am.forward(f.clone(), style);
             let diff = (out - f.clone()).abs().max().into_scalar::<f32>();
-            assert_eq!(diff, 0.0, "AM at initialisation changed the features by {diff}");
+            assert_eq!(
+                diff, 0.0,
+                "AM at initialisation changed the features by {diff}"
+            );
         }
     }
 

@@ -1,12 +1,11 @@
 //! The view-dependent colour head of a radiance field: features and an encoded view direction
 //! → RGB in [0, 1].
 
-use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::activation::{relu, sigmoid};
 use serde::{Deserialize, Serialize};
 
 use super::encoding::FourierEncoding;
+use super::mlp::RgbMlp;
 use super::sh::{spherical_harmonics, spherical_harmonics_host};
 
 /// How the view direction enters the colour head.
@@ -43,7 +42,9 @@ impl DirEncoding {
         let mut out = Vec::with_capacity(dirs.len() / 3 * d_out);
         for d in dirs.chunks_exact(3) {
             match self {
-                Self::SphericalHarmonics => out.extend(spherical_harmonics_host([d[0], d[1], d[2]])),
+                Self::SphericalHarmonics => {
+                    out.extend(spherical_harmonics_host([d[0], d[1], d[2]]))
+                }
                 Self::Fourier(n) => {
                     out.extend_from_slice(d);
                     for k in 0..*n {
@@ -76,8 +77,8 @@ pub struct ColorHeadConfig {
 /// `[features, enc(dir)]` → ReLU layers → sigmoid RGB.
 #[derive(Module, Debug)]
 pub struct ColorHead {
-    /// Hidden layers, then the RGB layer.
-    pub layers: Vec<Linear>,
+    /// Hidden ReLU layers and the linear RGB layer.
+    pub mlp: RgbMlp,
     /// View-direction encoding.
     #[module(skip)]
     pub dirs: DirEncoding,
@@ -86,15 +87,9 @@ pub struct ColorHead {
 impl ColorHeadConfig {
     /// Builds the head.
     pub fn init(&self, device: &Device) -> ColorHead {
-        let mut layers = Vec::new();
-        let mut d_in = self.d_features + self.dirs.d_out();
-        for _ in 0..self.depth {
-            layers.push(LinearConfig::new(d_in, self.d_hidden).init(device));
-            d_in = self.d_hidden;
-        }
-        layers.push(LinearConfig::new(d_in, 3).init(device));
+        let d_in = self.d_features + self.dirs.d_out();
         ColorHead {
-            layers,
+            mlp: RgbMlp::new(d_in, self.d_hidden, self.depth, device),
             dirs: self.dirs,
         }
     }
@@ -104,21 +99,15 @@ impl ColorHead {
     /// Encoded view directions `[N, d_out]` of unit directions `dirs` (`N·3`, host data).
     pub fn encode_dirs(&self, dirs: &[f32], device: &Device) -> Tensor<2> {
         let n = dirs.len() / 3;
-        Tensor::<1>::from_floats(self.dirs.encode_host(dirs).as_slice(), device).reshape([n, self.dirs.d_out()])
+        Tensor::<1>::from_floats(self.dirs.encode_host(dirs).as_slice(), device)
+            .reshape([n, self.dirs.d_out()])
     }
 
     /// `features [N, F]`, encoded view directions `[N, d_out]` (see
     /// [`ColorHead::encode_dirs`] or [`DirEncoding::encode`]) → RGB `[N, 3]`.
     pub fn forward(&self, features: Tensor<2>, encoded_dirs: Tensor<2>) -> Tensor<2> {
-        let mut h = Tensor::cat(vec![features, encoded_dirs], 1);
-        let last = self.layers.len() - 1;
-        for (i, l) in self.layers.iter().enumerate() {
-            h = l.forward(h);
-            if i < last {
-                h = relu(h);
-            }
-        }
-        sigmoid(h)
+        self.mlp
+            .forward(Tensor::cat(vec![features, encoded_dirs], 1))
     }
 }
 

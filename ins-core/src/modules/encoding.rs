@@ -47,7 +47,12 @@ mod tests {
         let mut want = vec![0.3f32, -1.2];
         for k in 0..3 {
             let f = (1 << k) as f32;
-            want.extend([(0.3 * f).sin(), (-1.2 * f).sin(), (0.3 * f).cos(), (-1.2 * f).cos()]);
+            want.extend([
+                (0.3 * f).sin(),
+                (-1.2 * f).sin(),
+                (0.3 * f).cos(),
+                (-1.2 * f).cos(),
+            ]);
         }
         for (a, b) in v.iter().zip(&want) {
             assert!((a - b).abs() < 1e-6, "{v:?} vs {want:?}");

@@ -91,7 +91,10 @@ impl Field {
     /// directions encoded by [`ColorHead::encode_dirs`](super::color_head::ColorHead::encode_dirs).
     pub fn forward(&self, x: Tensor<2>, encoded_dirs: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
         let (raw, features) = self.geometry.forward(x);
-        (self.geometry.activate(raw), self.color.forward(features, encoded_dirs))
+        (
+            self.geometry.activate(raw),
+            self.color.forward(features, encoded_dirs),
+        )
     }
 
     /// Density only (for occupancy grids and geometry checks).

@@ -54,7 +54,11 @@ impl GridGeometry {
         let a = self.aabb;
         let min = Tensor::<1>::from_floats([a[0], a[1], a[2]], &device).reshape([1, 3]);
         let inv = Tensor::<1>::from_floats(
-            [1.0 / (a[3] - a[0]), 1.0 / (a[4] - a[1]), 1.0 / (a[5] - a[2])],
+            [
+                1.0 / (a[3] - a[0]),
+                1.0 / (a[4] - a[1]),
+                1.0 / (a[5] - a[2]),
+            ],
             &device,
         )
         .reshape([1, 3]);

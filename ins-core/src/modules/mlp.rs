@@ -62,6 +62,33 @@ impl ReluMlp {
     }
 }
 
+/// Hidden ReLU layers, then a linear layer to RGB squashed by a sigmoid: the colour networks
+/// of NeRF and IDR.
+#[derive(Module, Debug)]
+pub struct RgbMlp {
+    /// The hidden layers.
+    pub hidden: ReluMlp,
+    /// The RGB layer.
+    pub rgb: Linear,
+}
+
+impl RgbMlp {
+    /// `depth` hidden layers of width `d_hidden` over `d_input` inputs (none: linear to RGB).
+    pub fn new(d_input: usize, d_hidden: usize, depth: usize, device: &Device) -> Self {
+        let hidden = ReluMlpConfig::new(d_input, d_hidden, depth).init(device);
+        let d_last = if depth == 0 { d_input } else { d_hidden };
+        RgbMlp {
+            hidden,
+            rgb: LinearConfig::new(d_last, 3).init(device),
+        }
+    }
+
+    /// `[N, d_input] → [N, 3]` in (0, 1).
+    pub fn forward(&self, input: Tensor<2>) -> Tensor<2> {
+        burn::tensor::activation::sigmoid(self.rgb.forward(self.hidden.forward(input)))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -81,15 +108,25 @@ mod tests {
         let a = mlp.forward(Tensor::<2>::ones([1, 5], &d));
         let b = mlp.forward(Tensor::<2>::ones([1, 5], &d).mul_scalar(-2.0));
         let diff = (a - b).abs().sum().into_scalar::<f32>();
-        assert!(diff > 1e-4, "output ignores the input although the skip carries it");
+        assert!(
+            diff > 1e-4,
+            "output ignores the input although the skip carries it"
+        );
     }
 
     #[test]
     fn output_is_the_last_hidden_activation() {
         let d = Device::flex();
         let mlp = ReluMlpConfig::new(3, 16, 2).init(&d);
-        let y = mlp.forward(Tensor::<2>::random([64, 3], burn::tensor::Distribution::Default, &d));
+        let y = mlp.forward(Tensor::<2>::random(
+            [64, 3],
+            burn::tensor::Distribution::Default,
+            &d,
+        ));
         assert_eq!(y.dims(), [64, 16]);
-        assert!(y.min().into_scalar::<f32>() >= 0.0, "ReLU output is negative");
+        assert!(
+            y.min().into_scalar::<f32>() >= 0.0,
+            "ReLU output is negative"
+        );
     }
 }

@@ -55,9 +55,14 @@ impl MlpGeometryConfig {
 impl MlpGeometry {
     /// `x [N, 3]` → raw density `[N]` and features `[N, d_hidden]`.
     pub fn forward(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
-        let h = self.trunk.forward(FourierEncoding::new(self.n_freqs).encode(x));
+        let h = self
+            .trunk
+            .forward(FourierEncoding::new(self.n_freqs).encode(x));
         let [n, _] = h.dims();
-        (self.sigma.forward(h.clone()).reshape([n]), self.feature.forward(h))
+        (
+            self.sigma.forward(h.clone()).reshape([n]),
+            self.feature.forward(h),
+        )
     }
 
     /// Width of the features.

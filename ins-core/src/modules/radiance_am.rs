@@ -82,7 +82,13 @@ impl RadianceAmConfig {
 impl FeatureBlend {
     /// A feature blend alone (surfaces have no density to stylize): `[f, s]` → `depth`
     /// linear layers of width `d_hidden` → `d_features`, with γ = 1.
-    pub fn new(d_features: usize, d_style: usize, d_hidden: usize, depth: usize, device: &Device) -> Self {
+    pub fn new(
+        d_features: usize,
+        d_style: usize,
+        d_hidden: usize,
+        depth: usize,
+        device: &Device,
+    ) -> Self {
         RadianceAmConfig::new(d_features, d_style)
             .with_d_hidden(d_hidden)
             .with_feature_depth(depth)
@@ -110,7 +116,12 @@ fn blend<const D: usize>(w: Tensor<1>, a: Tensor<D>, b: Tensor<D>) -> Tensor<D> 
 impl RadianceAm {
     /// `sigma [N]`, `features [N, F]`, `style [N, S]` → stylized raw density `[N]` and
     /// features `[N, F]`.
-    pub fn forward(&self, sigma: Tensor<1>, features: Tensor<2>, style: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
+    pub fn forward(
+        &self,
+        sigma: Tensor<1>,
+        features: Tensor<2>,
+        style: Tensor<2>,
+    ) -> (Tensor<1>, Tensor<2>) {
         let [n, _] = features.dims();
         let fs = Tensor::cat(vec![features.clone(), style.clone()], 1);
         let d = &self.density;

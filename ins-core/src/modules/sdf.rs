@@ -29,9 +29,20 @@ use super::hash_grid::{HashGrid, HashGridConfig};
 const BETA: f64 = 100.0;
 
 /// A linear layer initialised with weights `N(mean, std)` and bias `bias`.
-fn linear_normal(d_in: usize, d_out: usize, mean: f64, std: f64, bias: f64, device: &Device) -> Linear {
+fn linear_normal(
+    d_in: usize,
+    d_out: usize,
+    mean: f64,
+    std: f64,
+    bias: f64,
+    device: &Device,
+) -> Linear {
     let mut l = LinearConfig::new(d_in, d_out).init(device);
-    l.weight = Param::from_tensor(Tensor::random([d_in, d_out], Distribution::Normal(mean, std), device));
+    l.weight = Param::from_tensor(Tensor::random(
+        [d_in, d_out],
+        Distribution::Normal(mean, std),
+        device,
+    ));
     l.bias = Some(Param::from_tensor(Tensor::full([d_out], bias, device)));
     l
 }
@@ -69,7 +80,10 @@ impl Dual {
     fn softplus(self) -> Self {
         let [n, d] = self.h.dims();
         let slope = sigmoid(self.h.clone().mul_scalar(BETA as f32));
-        let slope = slope.unsqueeze_dim::<3>(0).expand([3, n, d]).reshape([3 * n, d]);
+        let slope = slope
+            .unsqueeze_dim::<3>(0)
+            .expand([3, n, d])
+            .reshape([3 * n, d]);
         Self {
             h: softplus(self.h, BETA),
             t: self.t * slope,
@@ -109,10 +123,15 @@ fn encode_dual(x: Tensor<2>, n_freqs: usize) -> Dual {
     }
     let deriv = Tensor::cat(parts, 1);
     // Column c of the encoding belongs to coordinate c mod 3.
-    let masks: Vec<f32> = (0..3).flat_map(|k| (0..d).map(move |c| if c % 3 == k { 1.0 } else { 0.0 })).collect();
+    let masks: Vec<f32> = (0..3)
+        .flat_map(|k| (0..d).map(move |c| if c % 3 == k { 1.0 } else { 0.0 }))
+        .collect();
     let masks = Tensor::<1>::from_floats(masks.as_slice(), &device).reshape([3, 1, d]);
     let t = (deriv.unsqueeze_dim::<3>(0).expand([3, n, d]) * masks).reshape([3 * n, d]);
-    Dual { h: enc.encode(x), t }
+    Dual {
+        h: enc.encode(x),
+        t,
+    }
 }
 
 /// Configuration of an [`SdfMlp`].
@@ -157,14 +176,26 @@ fn distance_head(d_in: usize, d_out: usize, device: &Device) -> Linear {
     let mut l = LinearConfig::new(d_in, d_out).init(device);
     let w = l.weight.val();
     let small = Tensor::random([d_in, 1], Distribution::Normal(0.0, 1e-4), device);
-    l.weight = Param::from_tensor(Tensor::cat(vec![small, w.slice([0..d_in, 1..d_out])], 1).detach());
-    let b = l.bias.as_ref().map(|b| b.val()).unwrap_or_else(|| Tensor::zeros([d_out], device));
-    l.bias = Some(Param::from_tensor(Tensor::cat(vec![Tensor::zeros([1], device), b.slice([1..d_out])], 0).detach()));
+    l.weight =
+        Param::from_tensor(Tensor::cat(vec![small, w.slice([0..d_in, 1..d_out])], 1).detach());
+    let b = l
+        .bias
+        .as_ref()
+        .map(|b| b.val())
+        .unwrap_or_else(|| Tensor::zeros([d_out], device));
+    l.bias = Some(Param::from_tensor(
+        Tensor::cat(vec![Tensor::zeros([1], device), b.slice([1..d_out])], 0).detach(),
+    ));
     l
 }
 
 /// Adds the sphere `|x| − r` to the network's distance (and `x / |x|` to its gradient).
-fn add_sphere(x: Tensor<2>, radius: f32, sdf: Tensor<1>, grad: Option<Tensor<2>>) -> (Tensor<1>, Option<Tensor<2>>) {
+fn add_sphere(
+    x: Tensor<2>,
+    radius: f32,
+    sdf: Tensor<1>,
+    grad: Option<Tensor<2>>,
+) -> (Tensor<1>, Option<Tensor<2>>) {
     let [n, _] = x.dims();
     let norm = x.clone().square().sum_dim(1).sqrt().reshape([n]);
     let sdf = sdf + norm.clone().sub_scalar(radius);
@@ -192,7 +223,14 @@ impl SdfMlpConfig {
             let layer = if l == self.depth {
                 distance_head(input, output, device)
             } else {
-                let mut lin = linear_normal(input, output, 0.0, (2.0f64).sqrt() / (output as f64).sqrt(), 0.0, device);
+                let mut lin = linear_normal(
+                    input,
+                    output,
+                    0.0,
+                    (2.0f64).sqrt() / (output as f64).sqrt(),
+                    0.0,
+                    device,
+                );
                 if l == 0 {
                     // Only the raw coordinates drive the initial field.
                     zero_inputs(&mut lin, 3..d_in);
@@ -221,7 +259,8 @@ impl SdfMlp {
         let last = self.layers.len() - 1;
         for (l, layer) in self.layers.iter().enumerate() {
             if l == self.skip_at {
-                h = Tensor::cat(vec![h, input.clone()], 1).mul_scalar(std::f32::consts::FRAC_1_SQRT_2);
+                h = Tensor::cat(vec![h, input.clone()], 1)
+                    .mul_scalar(std::f32::consts::FRAC_1_SQRT_2);
             }
             h = layer.forward(h);
             if l < last {
@@ -229,7 +268,12 @@ impl SdfMlp {
             }
         }
         let [n, d] = h.dims();
-        let (sdf, _) = add_sphere(x, self.radius, h.clone().slice([0..n, 0..1]).reshape([n]), None);
+        let (sdf, _) = add_sphere(
+            x,
+            self.radius,
+            h.clone().slice([0..n, 0..1]).reshape([n]),
+            None,
+        );
         (sdf, h.slice([0..n, 1..d]))
     }
 
@@ -298,7 +342,14 @@ impl SdfGridConfig {
         let grid = self.grid.init(device);
         let d_in = 3 + grid.d_out();
         let h = self.d_hidden;
-        let hidden = linear_normal(d_in, h, 0.0, (2.0f64).sqrt() / (h as f64).sqrt(), 0.0, device);
+        let hidden = linear_normal(
+            d_in,
+            h,
+            0.0,
+            (2.0f64).sqrt() / (h as f64).sqrt(),
+            0.0,
+            device,
+        );
         let out = distance_head(h, 1 + self.d_features, device);
         SdfGrid {
             grid,
@@ -318,10 +369,18 @@ impl SdfGrid {
     /// `x [N, 3]` → signed distance `[N]` and features `[N, F]`.
     pub fn forward(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
         let enc = self.grid.forward(self.unit(x.clone()));
-        let h = softplus(self.hidden.forward(Tensor::cat(vec![x.clone(), enc], 1)), BETA);
+        let h = softplus(
+            self.hidden.forward(Tensor::cat(vec![x.clone(), enc], 1)),
+            BETA,
+        );
         let out = self.out.forward(h);
         let [n, d] = out.dims();
-        let (sdf, _) = add_sphere(x, self.radius, out.clone().slice([0..n, 0..1]).reshape([n]), None);
+        let (sdf, _) = add_sphere(
+            x,
+            self.radius,
+            out.clone().slice([0..n, 0..1]).reshape([n]),
+            None,
+        );
         (sdf, out.slice([0..n, 1..d]))
     }
 
@@ -396,14 +455,27 @@ mod tests {
     fn points(device: &Device) -> Tensor<2> {
         Tensor::<2>::from_floats(
             // Away from the grid levels' cell boundaries (finite differences cross no kink).
-            [[0.013, 0.021, -0.017], [0.61, 0.11, -0.23], [-0.31, 0.71, 0.43], [0.051, -0.87, 0.19], [0.93, 0.031, 0.071]],
+            [
+                [0.013, 0.021, -0.017],
+                [0.61, 0.11, -0.23],
+                [-0.31, 0.71, 0.43],
+                [0.051, -0.87, 0.19],
+                [0.93, 0.031, 0.071],
+            ],
             device,
         )
     }
 
     fn small_mlp(device: &Device) -> SdfNet {
         device.seed(11);
-        SdfNet::Mlp(SdfMlpConfig::new().with_d_hidden(64).with_depth(4).with_skip_at(2).with_d_features(8).init(device))
+        SdfNet::Mlp(
+            SdfMlpConfig::new()
+                .with_d_hidden(64)
+                .with_depth(4)
+                .with_skip_at(2)
+                .with_d_features(8)
+                .init(device),
+        )
     }
 
     fn small_grid(device: &Device) -> SdfNet {
@@ -418,7 +490,11 @@ mod tests {
         let w = g.hidden.weight.val();
         let noise = Tensor::random(w.dims(), Distribution::Normal(0.0, 0.5), device);
         g.hidden.weight = Param::from_tensor((w + noise).detach());
-        g.grid.table = Param::from_tensor(Tensor::random(g.grid.table.dims(), Distribution::Uniform(-0.5, 0.5), device));
+        g.grid.table = Param::from_tensor(Tensor::random(
+            g.grid.table.dims(),
+            Distribution::Uniform(-0.5, 0.5),
+            device,
+        ));
         SdfNet::Grid(g)
     }
 
@@ -427,23 +503,44 @@ mod tests {
         let d = Device::flex();
         d.seed(3);
         let net = SdfNet::Mlp(SdfMlpConfig::new().with_radius(0.5).init(&d));
-        let x = Tensor::<2>::from_floats([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 0.5]], &d);
+        let x = Tensor::<2>::from_floats(
+            [
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, -1.0, 0.0],
+                [0.0, 0.0, 0.5],
+            ],
+            &d,
+        );
         let (f, _, g) = net.forward_with_gradient(x);
         let f = f.into_data().try_to_vec::<f32>().unwrap();
         assert!((f[0] + 0.5).abs() < 0.01, "f(0) = {}", f[0]);
-        assert!((f[1] - 0.5).abs() < 0.01 && (f[2] - 0.5).abs() < 0.01, "f at 2r: {f:?}");
+        assert!(
+            (f[1] - 0.5).abs() < 0.01 && (f[2] - 0.5).abs() < 0.01,
+            "f at 2r: {f:?}"
+        );
         assert!(f[3].abs() < 0.01, "f on the sphere: {}", f[3]);
         // The normal of the sphere points outward.
         let g = g.into_data().try_to_vec::<f32>().unwrap();
         assert!(g[3] > 0.9 && g[7] < -0.9 && g[11] > 0.9, "{g:?}");
         let d2 = Device::flex();
-        let grid = SdfNet::Grid(SdfGridConfig::new(HashGridConfig::new().with_log2_table(12)).with_radius(0.5).init(1.0, &d2));
+        let grid = SdfNet::Grid(
+            SdfGridConfig::new(HashGridConfig::new().with_log2_table(12))
+                .with_radius(0.5)
+                .init(1.0, &d2),
+        );
         let f = grid
-            .sdf(Tensor::<2>::from_floats([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], &d2))
+            .sdf(Tensor::<2>::from_floats(
+                [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
+                &d2,
+            ))
             .into_data()
             .try_to_vec::<f32>()
             .unwrap();
-        assert!((f[0] + 0.5).abs() < 0.01 && (f[1] - 0.5).abs() < 0.01, "grid sphere: {f:?}");
+        assert!(
+            (f[0] + 0.5).abs() < 0.01 && (f[1] - 0.5).abs() < 0.01,
+            "grid sphere: {f:?}"
+        );
     }
 
     fn check_gradient(net: &SdfNet, d: &Device) {
@@ -471,7 +568,10 @@ mod tests {
             for i in 0..a.len() {
                 let fd = (a[i] - b[i]) / (2.0 * eps);
                 let exact = g[i * 3 + k];
-                assert!((fd - exact).abs() < 2e-2 * (1.0 + exact.abs()), "point {i} axis {k}: fd {fd} vs {exact}");
+                assert!(
+                    (fd - exact).abs() < 2e-2 * (1.0 + exact.abs()),
+                    "point {i} axis {k}: fd {fd} vs {exact}"
+                );
             }
         }
     }
@@ -490,7 +590,9 @@ mod tests {
         let x = points(&ad);
         let loss = |n: &SdfNet| {
             let (_, _, g) = n.forward_with_gradient(x.clone());
-            (g.square().sum_dim(1).sqrt().sub_scalar(1.0)).square().sum()
+            (g.square().sum_dim(1).sqrt().sub_scalar(1.0))
+                .square()
+                .sum()
         };
         let grads = loss(&net).backward();
         let (param, analytic) = match &net {
@@ -504,7 +606,12 @@ mod tests {
             }
         };
         let analytic = analytic.into_data().try_to_vec::<f32>().unwrap();
-        let base = param.clone().inner().into_data().try_to_vec::<f32>().unwrap();
+        let base = param
+            .clone()
+            .inner()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
         let dims = param.dims();
         // The largest few entries of the analytic gradient, checked by central differences.
         let mut idx: Vec<usize> = (0..analytic.len()).collect();
@@ -538,4 +645,3 @@ mod tests {
         check_eikonal_gradient(small_grid(&ad), &ad);
     }
 }
-

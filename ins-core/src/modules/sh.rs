@@ -8,8 +8,16 @@ pub fn spherical_harmonics(dirs: Tensor<2>) -> Tensor<2> {
     let [n, _] = dirs.dims();
     let c = |k: usize| dirs.clone().slice([0..n, k..k + 1]);
     let (x, y, z) = (c(0), c(1), c(2));
-    let (xx, yy, zz) = (x.clone() * x.clone(), y.clone() * y.clone(), z.clone() * z.clone());
-    let (xy, yz, xz) = (x.clone() * y.clone(), y.clone() * z.clone(), x.clone() * z.clone());
+    let (xx, yy, zz) = (
+        x.clone() * x.clone(),
+        y.clone() * y.clone(),
+        z.clone() * z.clone(),
+    );
+    let (xy, yz, xz) = (
+        x.clone() * y.clone(),
+        y.clone() * z.clone(),
+        x.clone() * z.clone(),
+    );
     let ones = Tensor::<2>::ones([n, 1], &dirs.device());
     let terms = vec![
         ones.mul_scalar(0.282_094_79),
@@ -88,12 +96,20 @@ mod tests {
             v.extend([r * a.cos(), r * a.sin(), z]);
         }
         let y = spherical_harmonics(Tensor::<1>::from_floats(v.as_slice(), &d).reshape([n, 3]));
-        let gram = y.clone().transpose().matmul(y).mul_scalar(4.0 * std::f32::consts::PI / n as f32);
+        let gram = y
+            .clone()
+            .transpose()
+            .matmul(y)
+            .mul_scalar(4.0 * std::f32::consts::PI / n as f32);
         let g = gram.into_data().try_to_vec::<f32>().unwrap();
         for i in 0..16 {
             for j in 0..16 {
                 let want = if i == j { 1.0 } else { 0.0 };
-                assert!((g[i * 16 + j] - want).abs() < 2e-3, "({i}, {j}): {}", g[i * 16 + j]);
+                assert!(
+                    (g[i * 16 + j] - want).abs() < 2e-3,
+                    "({i}, {j}): {}",
+                    g[i * 16 + j]
+                );
             }
         }
     }

@@ -107,7 +107,10 @@ mod tests {
         let d = Device::flex();
         d.seed(2);
         let x = Tensor::<2>::random([4096, 2], Distribution::Uniform(-1.0, 1.0), &d);
-        let mut h = SineLayerConfig::new(2, 256).with_is_first(true).init(&d).forward(x);
+        let mut h = SineLayerConfig::new(2, 256)
+            .with_is_first(true)
+            .init(&d)
+            .forward(x);
         for _ in 0..4 {
             h = SineLayerConfig::new(256, 256).init(&d).forward(h);
         }

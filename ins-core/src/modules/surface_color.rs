@@ -1,11 +1,10 @@
 //! IDR's rendering network: the colour of a surface point from its position, normal, the
 //! viewing direction and the SDF network's features, `(x, n, v, f) → RGB`.
 
-use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::activation::{relu, sigmoid};
 
 use super::encoding::FourierEncoding;
+use super::mlp::RgbMlp;
 
 /// Configuration of a [`SurfaceColor`].
 #[derive(Config, Debug)]
@@ -26,8 +25,8 @@ pub struct SurfaceColorConfig {
 /// `[x, n, enc(v), f]` → ReLU layers → sigmoid RGB.
 #[derive(Module, Debug)]
 pub struct SurfaceColor {
-    /// Hidden layers, then the RGB layer.
-    pub layers: Vec<Linear>,
+    /// Hidden ReLU layers and the linear RGB layer.
+    pub mlp: RgbMlp,
     /// Octaves of the view-direction encoding.
     pub dir_freqs: usize,
 }
@@ -36,15 +35,8 @@ impl SurfaceColorConfig {
     /// Builds the network.
     pub fn init(&self, device: &Device) -> SurfaceColor {
         let d_in = 3 + 3 + FourierEncoding::new(self.dir_freqs).d_out(3) + self.d_features;
-        let mut layers = Vec::new();
-        let mut a = d_in;
-        for _ in 0..self.depth {
-            layers.push(LinearConfig::new(a, self.d_hidden).init(device));
-            a = self.d_hidden;
-        }
-        layers.push(LinearConfig::new(a, 3).init(device));
         SurfaceColor {
-            layers,
+            mlp: RgbMlp::new(d_in, self.d_hidden, self.depth, device),
             dir_freqs: self.dir_freqs,
         }
     }
@@ -52,16 +44,15 @@ impl SurfaceColorConfig {
 
 impl SurfaceColor {
     /// `x, normals, dirs [N, 3]`, `features [N, F]` → RGB `[N, 3]`.
-    pub fn forward(&self, x: Tensor<2>, normals: Tensor<2>, dirs: Tensor<2>, features: Tensor<2>) -> Tensor<2> {
+    pub fn forward(
+        &self,
+        x: Tensor<2>,
+        normals: Tensor<2>,
+        dirs: Tensor<2>,
+        features: Tensor<2>,
+    ) -> Tensor<2> {
         let v = FourierEncoding::new(self.dir_freqs).encode(dirs);
-        let mut h = Tensor::cat(vec![x, normals, v, features], 1);
-        let last = self.layers.len() - 1;
-        for (i, l) in self.layers.iter().enumerate() {
-            h = l.forward(h);
-            if i < last {
-                h = relu(h);
-            }
-        }
-        sigmoid(h)
+        self.mlp
+            .forward(Tensor::cat(vec![x, normals, v, features], 1))
     }
 }

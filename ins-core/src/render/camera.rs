@@ -173,15 +173,30 @@ impl Camera {
     /// pixel coordinates scale by `1/factor`, so the principal point and focal lengths do too.
     pub fn downscaled(&self, factor: u32) -> Camera {
         let f = factor.max(1);
-        let s = 1.0 / f as f32;
+        self.rescaled(
+            self.width / f,
+            self.height / f,
+            1.0 / f as f32,
+            1.0 / f as f32,
+        )
+    }
+
+    /// The same camera rendering a `width × height` image (each axis scaled on its own).
+    pub fn resized(&self, width: u32, height: u32) -> Camera {
+        let sx = width as f32 / self.width.max(1) as f32;
+        let sy = height as f32 / self.height.max(1) as f32;
+        self.rescaled(width, height, sx, sy)
+    }
+
+    fn rescaled(&self, width: u32, height: u32, sx: f32, sy: f32) -> Camera {
         Camera {
-            width: self.width / f,
-            height: self.height / f,
-            fx: self.fx * s,
-            fy: self.fy * s,
-            cx: self.cx * s,
-            cy: self.cy * s,
-            skew: self.skew * s,
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: self.cx * sx,
+            cy: self.cy * sy,
+            skew: self.skew * sx,
             c2w: self.c2w,
         }
     }

@@ -65,7 +65,9 @@ impl Bounds {
     /// The axis-aligned box that encloses the volume.
     pub fn aabb(&self) -> (Vec3, Vec3) {
         match *self {
-            Bounds::Sphere { center, radius } => (center - Vec3::splat(radius), center + Vec3::splat(radius)),
+            Bounds::Sphere { center, radius } => {
+                (center - Vec3::splat(radius), center + Vec3::splat(radius))
+            }
             Bounds::Aabb { min, max } => (min, max),
         }
     }
@@ -239,7 +241,12 @@ mod tests {
         let rows = mat3_rows(r * 2.5);
         let m = [
             [rows[0][0] as f64, rows[0][1] as f64, rows[0][2] as f64, 1.0],
-            [rows[1][0] as f64, rows[1][1] as f64, rows[1][2] as f64, -2.0],
+            [
+                rows[1][0] as f64,
+                rows[1][1] as f64,
+                rows[1][2] as f64,
+                -2.0,
+            ],
             [rows[2][0] as f64, rows[2][1] as f64, rows[2][2] as f64, 0.5],
         ];
         let s = Similarity::from_affine(&m).unwrap();
@@ -255,13 +262,18 @@ mod tests {
             center: Vec3::ZERO,
             radius: 1.0,
         };
-        let (t0, t1) = sphere.intersect(Vec3::new(0.0, 0.0, 3.0), Vec3::NEG_Z).unwrap();
+        let (t0, t1) = sphere
+            .intersect(Vec3::new(0.0, 0.0, 3.0), Vec3::NEG_Z)
+            .unwrap();
         assert!((t0 - 2.0).abs() < 1e-6 && (t1 - 4.0).abs() < 1e-6);
         let aabb = Bounds::Aabb {
             min: Vec3::splat(-1.0),
             max: Vec3::splat(1.0),
         };
-        assert!(aabb.intersect(Vec3::new(0.0, 3.0, 3.0), Vec3::NEG_Z).is_none());
+        assert!(
+            aabb.intersect(Vec3::new(0.0, 3.0, 3.0), Vec3::NEG_Z)
+                .is_none()
+        );
         assert_eq!(aabb.outline().len(), 12);
     }
 }

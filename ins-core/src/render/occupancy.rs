@@ -155,13 +155,22 @@ impl OccupancyGrid {
         // Decay everything once, then raise the evaluated cells (a cell chosen twice keeps its
         // larger value).
         for d in &mut self.density {
-            *d = if *d >= f32::MAX / 4.0 { 0.0 } else { *d * self.decay };
+            *d = if *d >= f32::MAX / 4.0 {
+                0.0
+            } else {
+                *d * self.decay
+            };
         }
         for (&c, &v) in chosen.iter().zip(&new) {
             let v = if v.is_finite() { v.max(0.0) } else { 0.0 };
             self.density[c] = self.density[c].max(v);
         }
-        let mean = self.density.iter().map(|&d| (d * self.step) as f64).sum::<f64>() / total as f64;
+        let mean = self
+            .density
+            .iter()
+            .map(|&d| (d * self.step) as f64)
+            .sum::<f64>()
+            / total as f64;
         let threshold = self.threshold.min(mean as f32);
         for (o, &d) in self.occupied.iter_mut().zip(&self.density) {
             *o = d * self.step > threshold;
@@ -192,8 +201,10 @@ impl OccupancyGrid {
                 let t1 = rays.far[i].min(b1);
                 let dt = self.step / len;
                 let offset = match seed {
-                    Some(s) => SmallRng::seed_from_u64(s ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
-                        .random::<f32>(),
+                    Some(s) => {
+                        SmallRng::seed_from_u64(s ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+                            .random::<f32>()
+                    }
                     None => 0.5,
                 };
                 let mut out = Vec::new();
@@ -281,12 +292,22 @@ mod tests {
             .map(|(&r, &t)| (r, t))
             .collect();
         assert!(!dense.is_empty());
-        let kept_set: Vec<(u32, f32)> = kept.ray.iter().copied().zip(kept.t.iter().copied()).collect();
+        let kept_set: Vec<(u32, f32)> = kept
+            .ray
+            .iter()
+            .copied()
+            .zip(kept.t.iter().copied())
+            .collect();
         for s in &dense {
             assert!(kept_set.contains(s), "dense sample {s:?} was culled");
         }
         // And empty space costs nothing: far fewer samples than marching everything.
-        assert!(kept.len() * 3 < every.len(), "{} of {}", kept.len(), every.len());
+        assert!(
+            kept.len() * 3 < every.len(),
+            "{} of {}",
+            kept.len(),
+            every.len()
+        );
     }
 
     #[test]
@@ -299,8 +320,14 @@ mod tests {
         for s in 0..100 {
             g.update(usize::MAX, 10 + s, moved);
         }
-        assert!(!g.is_occupied(Vec3::splat(0.35)), "the old cube is still occupied");
-        assert!(g.is_occupied(Vec3::splat(0.75)), "the new cube is not occupied");
+        assert!(
+            !g.is_occupied(Vec3::splat(0.35)),
+            "the old cube is still occupied"
+        );
+        assert!(
+            g.is_occupied(Vec3::splat(0.75)),
+            "the new cube is not occupied"
+        );
         assert_eq!(g.occupied.iter().filter(|&&o| o).count(), 27);
     }
 }

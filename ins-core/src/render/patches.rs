@@ -197,8 +197,16 @@ mod tests {
         assert!(PatchSpec::new(0, 1).fitted(64, 64).is_err());
         assert!(PatchSpec::new(u32::MAX, u32::MAX).fitted(64, 64).is_err());
         let mut rng = SmallRng::seed_from_u64(0);
-        assert!(PatchSpec::new(40, 2).random_origin(64, 64, &mut rng).is_err());
-        assert!(PatchSpec::new(u32::MAX, 2).random_origin(64, 64, &mut rng).is_err());
+        assert!(
+            PatchSpec::new(40, 2)
+                .random_origin(64, 64, &mut rng)
+                .is_err()
+        );
+        assert!(
+            PatchSpec::new(u32::MAX, 2)
+                .random_origin(64, 64, &mut rng)
+                .is_err()
+        );
     }
 
     #[test]

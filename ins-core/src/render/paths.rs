@@ -44,7 +44,11 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
         .collect();
     let first = cams.first()?;
     let center = scene.bounds.center();
-    let up = cams.iter().map(|c| c.up()).sum::<Vec3>().normalize_or_zero();
+    let up = cams
+        .iter()
+        .map(|c| c.up())
+        .sum::<Vec3>()
+        .normalize_or_zero();
     let mut radius = 0.0;
     let mut elevation = 0.0;
     for c in &cams {
@@ -76,7 +80,11 @@ pub fn spiral(
         return Vec::new();
     };
     let avg = average_pose(cameras);
-    let up = cameras.iter().map(|c| c.up()).sum::<Vec3>().normalize_or_zero();
+    let up = cameras
+        .iter()
+        .map(|c| c.up())
+        .sum::<Vec3>()
+        .normalize_or_zero();
     let close = min_depth * 0.9;
     let inf = max_depth * 5.0;
     let dt = 0.75;

@@ -56,7 +56,9 @@ pub fn hierarchical(t: Tensor<2>, weights: Tensor<2>, n: usize, seed: Option<u64
         Some(seed) => uniforms(r, n, seed, &device),
         None => Tensor::<2>::full([r, n], 0.5, &device),
     };
-    let bins = Tensor::<1, Int>::arange(0..n as i64, &device).float().reshape([1, n]);
+    let bins = Tensor::<1, Int>::arange(0..n as i64, &device)
+        .float()
+        .reshape([1, n]);
     let u = (bins + u).div_scalar(n as f32).clamp(0.0, 1.0 - 1e-6);
     // Index of the CDF bin each u falls in: count of edges with cdf ≤ u, minus one.
     let below = u
@@ -98,7 +100,10 @@ mod tests {
             let bin = (hi - lo) / 8.0;
             for i in 0..8 {
                 let v = t[r * 8 + i];
-                assert!(v >= lo + i as f32 * bin && v < lo + (i + 1) as f32 * bin, "{v}");
+                assert!(
+                    v >= lo + i as f32 * bin && v < lo + (i + 1) as f32 * bin,
+                    "{v}"
+                );
             }
         }
         let centres = vec2(stratified(near, far, 4, None));
@@ -112,7 +117,9 @@ mod tests {
         // between the midpoints around them, [39.5, 43.5].
         let s = 64;
         let t: Vec<f32> = (0..s).map(|i| i as f32).collect();
-        let w: Vec<f32> = (0..s).map(|i| if (40..44).contains(&i) { 1.0 } else { 0.0 }).collect();
+        let w: Vec<f32> = (0..s)
+            .map(|i| if (40..44).contains(&i) { 1.0 } else { 0.0 })
+            .collect();
         let t = Tensor::<1>::from_floats(t.as_slice(), &d).reshape([1, s]);
         let w = Tensor::<1>::from_floats(w.as_slice(), &d).reshape([1, s]);
         let all = vec2(hierarchical(t, w, 1000, Some(5)));
@@ -121,7 +128,10 @@ mod tests {
         // Coarse samples are kept; the 1000 new ones fall inside the weighted region except
         // for the 1e-5 floor's share (≈ 60·1e-5/4 of the mass).
         let inside = all.iter().filter(|&&v| (39.5..=43.5).contains(&v)).count();
-        assert!(inside >= 1000 + 4 - 2, "{inside} samples in the weighted bins");
+        assert!(
+            inside >= 1000 + 4 - 2,
+            "{inside} samples in the weighted bins"
+        );
     }
 
     #[test]

@@ -84,11 +84,15 @@ pub fn sphere_trace(
         active = still;
     }
     // 2. Dense sampling for every ray that has not converged.
-    let rest: Vec<usize> = (0..n).filter(|&i| !hit[i] && rays.far[i] > rays.near[i]).collect();
+    let rest: Vec<usize> = (0..n)
+        .filter(|&i| !hit[i] && rays.far[i] > rays.near[i])
+        .collect();
     let mut t_min = rays.near.clone();
     if !rest.is_empty() && opts.samples >= 2 {
         let m = opts.samples;
-        let ts = |i: usize, j: usize| rays.near[i] + (rays.far[i] - rays.near[i]) * j as f32 / (m - 1) as f32;
+        let ts = |i: usize, j: usize| {
+            rays.near[i] + (rays.far[i] - rays.near[i]) * j as f32 / (m - 1) as f32
+        };
         points.clear();
         for &i in &rest {
             for j in 0..m {
@@ -103,11 +107,10 @@ pub fn sphere_trace(
             match first_inside {
                 Some(j) => brackets.push((i, ts(i, j - 1), fs[j - 1], ts(i, j), fs[j])),
                 None => {
-                    let (jmin, _) = fs
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, v)| v.is_finite())
-                        .fold((0, f32::INFINITY), |b, (j, &v)| if v < b.1 { (j, v) } else { b });
+                    let (jmin, _) = fs.iter().enumerate().filter(|(_, v)| v.is_finite()).fold(
+                        (0, f32::INFINITY),
+                        |b, (j, &v)| if v < b.1 { (j, v) } else { b },
+                    );
                     t_min[i] = ts(i, jmin);
                 }
             }
@@ -122,7 +125,11 @@ pub fn sphere_trace(
                 .iter()
                 .map(|&(_, t0, f0, t1, f1)| {
                     let d = f1 - f0;
-                    if d.abs() > 1e-12 { (t0 - f0 * (t1 - t0) / d).clamp(t0, t1) } else { 0.5 * (t0 + t1) }
+                    if d.abs() > 1e-12 {
+                        (t0 - f0 * (t1 - t0) / d).clamp(t0, t1)
+                    } else {
+                        0.5 * (t0 + t1)
+                    }
                 })
                 .collect();
             for (b, &tm) in brackets.iter().zip(&mids) {
@@ -141,7 +148,11 @@ pub fn sphere_trace(
         }
         for (i, t0, f0, t1, f1) in brackets {
             let d = f1 - f0;
-            t[i] = if d.abs() > 1e-12 { t0 - f0 * (t1 - t0) / d } else { 0.5 * (t0 + t1) };
+            t[i] = if d.abs() > 1e-12 {
+                t0 - f0 * (t1 - t0) / d
+            } else {
+                0.5 * (t0 + t1)
+            };
             hit[i] = true;
         }
     }
@@ -195,11 +206,19 @@ mod tests {
             if rr < 0.49 * 0.49 {
                 assert!(out.hit[i], "ray {i} missed");
                 let want = 2.0 - (0.25 - rr).sqrt();
-                assert!((out.t[i] - want).abs() < 1e-3, "ray {i}: {} vs {want}", out.t[i]);
+                assert!(
+                    (out.t[i] - want).abs() < 1e-3,
+                    "ray {i}: {} vs {want}",
+                    out.t[i]
+                );
             } else if rr > 0.51 * 0.51 {
                 assert!(!out.hit[i], "ray {i} should miss");
                 // The closest approach is the sphere's nearest point along the ray: t = 2.
-                assert!((out.t_min_sdf[i] - 2.0).abs() < 0.05, "ray {i}: {}", out.t_min_sdf[i]);
+                assert!(
+                    (out.t_min_sdf[i] - 2.0).abs() < 0.05,
+                    "ray {i}: {}",
+                    out.t_min_sdf[i]
+                );
             }
         }
     }
@@ -211,7 +230,11 @@ mod tests {
         for i in 0..r.len() {
             let y = r.origins[i].y;
             if y.abs() < 0.29 {
-                assert!(out.hit[i] && (out.t[i] - 1.7).abs() < 1e-3, "ray {i}: {:?}", (out.hit[i], out.t[i]));
+                assert!(
+                    out.hit[i] && (out.t[i] - 1.7).abs() < 1e-3,
+                    "ray {i}: {:?}",
+                    (out.hit[i], out.t[i])
+                );
             } else if y.abs() > 0.31 {
                 assert!(!out.hit[i]);
             }
@@ -228,6 +251,10 @@ mod tests {
         let i = 25;
         let (x, y) = (r.origins[i].x, r.origins[i].y);
         let want = 2.0 - (0.25 - x * x - y * y).sqrt();
-        assert!(out.hit[i] && (out.t[i] - want).abs() < 1e-3, "{} vs {want}", out.t[i]);
+        assert!(
+            out.hit[i] && (out.t[i] - want).abs() < 1e-3,
+            "{} vs {want}",
+            out.t[i]
+        );
     }
 }

@@ -42,7 +42,9 @@ pub fn composite(
 ) -> Composite {
     let [r, _] = sigma.dims();
     let w = weights(sigma, delta);
-    let colour: Tensor<2> = (w.clone().unsqueeze_dim::<3>(2) * rgb).sum_dim(1).reshape([r, 3]);
+    let colour: Tensor<2> = (w.clone().unsqueeze_dim::<3>(2) * rgb)
+        .sum_dim(1)
+        .reshape([r, 3]);
     let opacity: Tensor<1> = w.clone().sum_dim(1).reshape([r]);
     let depth: Tensor<1> = (w.clone() * t).sum_dim(1).reshape([r]);
     let device = colour.device();
@@ -72,10 +74,17 @@ mod tests {
         let n = 100;
         let dt = 4.0 / n as f32;
         let t: Vec<f32> = (0..n).map(|i| 2.0 + i as f32 * dt).collect();
-        let sigma: Vec<f32> = t.iter().map(|&x| if (3.5..4.0).contains(&x) { 1e4 } else { 0.0 }).collect();
+        let sigma: Vec<f32> = t
+            .iter()
+            .map(|&x| if (3.5..4.0).contains(&x) { 1e4 } else { 0.0 })
+            .collect();
         let mut rgb = Vec::new();
         for &x in &t {
-            rgb.extend(if x < 4.0 { [0.2, 0.4, 0.8] } else { [1.0, 0.0, 0.0] });
+            rgb.extend(if x < 4.0 {
+                [0.2, 0.4, 0.8]
+            } else {
+                [1.0, 0.0, 0.0]
+            });
         }
         let c = composite(
             row(&sigma, &d),
@@ -105,7 +114,10 @@ mod tests {
             row(&[1.0, 1.0, 0.0], &d),
             [0.0, 0.0, 1.0],
         );
-        assert_eq!(c.rgb.into_data().try_to_vec::<f32>().unwrap(), [0.0, 0.0, 1.0]);
+        assert_eq!(
+            c.rgb.into_data().try_to_vec::<f32>().unwrap(),
+            [0.0, 0.0, 1.0]
+        );
         assert_eq!(c.opacity.into_scalar::<f32>(), 0.0);
     }
 
@@ -114,7 +126,10 @@ mod tests {
         let d = Device::flex();
         let sigma = [0.5f32, 2.0, 1.0];
         let delta = [0.3f32, 0.2, 0.4];
-        let w = weights(row(&sigma, &d), row(&delta, &d)).into_data().try_to_vec::<f32>().unwrap();
+        let w = weights(row(&sigma, &d), row(&delta, &d))
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
         let mut acc = 0.0f32;
         for i in 0..3 {
             let want = (-acc).exp() * (1.0 - (-sigma[i] * delta[i]).exp());

@@ -49,15 +49,22 @@ pub fn module_bytes<M: Module>(model: &M) -> Result<Vec<u8>, TrainError> {
 
 /// Loads parameters written by [`module_bytes`] into `model` (same architecture), naming
 /// `origin` in the error.
-pub fn load_module_bytes<M: Module>(model: M, bytes: Vec<u8>, origin: &Path) -> Result<M, TrainError> {
-    let record = ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes))
+pub fn load_module_bytes<M: Module>(
+    model: M,
+    bytes: Vec<u8>,
+    origin: &Path,
+) -> Result<M, TrainError> {
+    let record = crate::contain::contain(|| ModuleRecord::from_bytes(Bytes::from_bytes_vec(bytes)))
+        .map_err(|e| TrainError::checkpoint(origin, format!("damaged model record: {e}")))?
         .map_err(|e| TrainError::checkpoint(origin, format!("not a model record: {e}")))?;
-    model.try_load_record(record).map_err(|e| {
-        TrainError::checkpoint(
-            origin,
-            format!("the saved model does not fit this configuration: {e}"),
-        )
-    })
+    crate::contain::contain(|| model.try_load_record(record))
+        .map_err(|e| TrainError::checkpoint(origin, format!("damaged model record: {e}")))?
+        .map_err(|e| {
+            TrainError::checkpoint(
+                origin,
+                format!("the saved model does not fit this configuration: {e}"),
+            )
+        })
 }
 
 const MODEL: &str = "model.bpk";
@@ -124,8 +131,8 @@ impl CheckpointStore {
         ins_io::write_synced(&tmp.join(MODEL), &ckpt.model)?;
         fault_delay();
         ins_io::write_synced(&tmp.join(OPTIM), &ckpt.optim)?;
-        let state = serde_json::to_vec_pretty(&ckpt.state)
-            .map_err(|e| TrainError::checkpoint(&tmp, e))?;
+        let state =
+            serde_json::to_vec_pretty(&ckpt.state).map_err(|e| TrainError::checkpoint(&tmp, e))?;
         ins_io::write_synced(&tmp.join(STATE), &state)?;
         if let Some(task) = &ckpt.task {
             ins_io::write_synced(&tmp.join(TASK), task)?;
@@ -204,12 +211,14 @@ impl CheckpointStore {
         let model = read(MODEL)?;
         let optim = read(OPTIM)?;
         let state_path = dir.join(STATE);
-        let state: serde_json::Value = serde_json::from_slice(&read(STATE)?)
-            .map_err(|e| TrainError::checkpoint(&state_path, format!("malformed trainer state: {e}")))?;
+        let state: serde_json::Value = serde_json::from_slice(&read(STATE)?).map_err(|e| {
+            TrainError::checkpoint(&state_path, format!("malformed trainer state: {e}"))
+        })?;
         let step = state
             .get("step")
             .and_then(|s| s.as_u64())
-            .ok_or_else(|| TrainError::checkpoint(&state_path, "no step"))? as usize;
+            .ok_or_else(|| TrainError::checkpoint(&state_path, "no step"))?
+            as usize;
         let task_path = dir.join(TASK);
         let task = if task_path.exists() {
             Some(read(TASK)?)
@@ -241,7 +250,10 @@ fn read_limited(path: &Path, cap: u64) -> Result<Vec<u8>, TrainError> {
         .read_to_end(&mut buf)
         .map_err(|e| TrainError::io(path, e))?;
     if buf.len() as u64 > cap {
-        return Err(TrainError::checkpoint(path, "too large for a checkpoint name"));
+        return Err(TrainError::checkpoint(
+            path,
+            "too large for a checkpoint name",
+        ));
     }
     Ok(buf)
 }
@@ -294,6 +306,9 @@ mod tests {
         let store = CheckpointStore::new(dir.path(), 2);
         fs::write(dir.path().join("latest"), "../../etc").unwrap();
         let e = store.load_latest().err().unwrap().to_string();
-        assert!(e.contains("latest") && e.contains("not a checkpoint folder"), "{e}");
+        assert!(
+            e.contains("latest") && e.contains("not a checkpoint folder"),
+            "{e}"
+        );
     }
 }

@@ -44,7 +44,10 @@ pub enum TrainError {
         weights: String,
     },
     /// An update made parameters non-finite although the loss was finite.
-    #[error("the last update made parameters non-finite at step {step}; {}", checkpoint_note(checkpoint))]
+    #[error(
+        "the last update made parameters non-finite at step {step}; {}",
+        checkpoint_note(checkpoint)
+    )]
     NonFiniteParameters {
         /// Global step.
         step: usize,
@@ -62,7 +65,9 @@ pub enum TrainError {
         known: String,
     },
     /// A parameter matches several groups, so its learning rate and freezing are ambiguous.
-    #[error("parameter {path} belongs to optimizer groups {first:?} and {second:?}; each parameter must be in exactly one")]
+    #[error(
+        "parameter {path} belongs to optimizer groups {first:?} and {second:?}; each parameter must be in exactly one"
+    )]
     AmbiguousParameter {
         /// Module path of the parameter.
         path: String,
@@ -80,7 +85,9 @@ pub enum TrainError {
         paths: Vec<String>,
     },
     /// A phase configures a group the model does not have.
-    #[error("phase {phase:?} configures optimizer group {group:?}, which the model does not have (groups: {known})")]
+    #[error(
+        "phase {phase:?} configures optimizer group {group:?}, which the model does not have (groups: {known})"
+    )]
     UnknownGroup {
         /// The phase.
         phase: String,
@@ -90,7 +97,9 @@ pub enum TrainError {
         known: String,
     },
     /// A phase weights a loss term its objective does not produce.
-    #[error("phase {phase:?} weights loss term {term:?}, which its objective does not produce (terms: {known})")]
+    #[error(
+        "phase {phase:?} weights loss term {term:?}, which its objective does not produce (terms: {known})"
+    )]
     UnknownTerm {
         /// The phase.
         phase: String,
@@ -100,7 +109,9 @@ pub enum TrainError {
         known: String,
     },
     /// A task returned a term it did not declare for the phase's objective.
-    #[error("the task returned loss term {term:?} in phase {phase:?}, which it does not declare (declared: {known})")]
+    #[error(
+        "the task returned loss term {term:?} in phase {phase:?}, which it does not declare (declared: {known})"
+    )]
     UndeclaredTerm {
         /// The phase.
         phase: String,

@@ -249,12 +249,18 @@ mod tests {
 
     model_with_groups!(
         Complete,
-        &[GroupSpec::new("a", &["inner.a"]), GroupSpec::new("b", &["inner.b"])]
+        &[
+            GroupSpec::new("a", &["inner.a"]),
+            GroupSpec::new("b", &["inner.b"])
+        ]
     );
     model_with_groups!(Forgetful, &[GroupSpec::new("a", &["inner.a"])]);
     model_with_groups!(
         Overlapping,
-        &[GroupSpec::new("all", &["inner"]), GroupSpec::new("b", &["inner.b"])]
+        &[
+            GroupSpec::new("all", &["inner"]),
+            GroupSpec::new("b", &["inner.b"])
+        ]
     );
     model_with_groups!(
         Misspelt,
@@ -279,7 +285,10 @@ mod tests {
         let e = ParamGroups::resolve(&Overlapping { inner: two() }).unwrap_err();
         assert!(matches!(&e, TrainError::AmbiguousParameter { .. }), "{e}");
         let e = ParamGroups::resolve(&Misspelt { inner: two() }).unwrap_err();
-        assert!(matches!(&e, TrainError::EmptyGroup { group, .. } if group == "c"), "{e}");
+        assert!(
+            matches!(&e, TrainError::EmptyGroup { group, .. } if group == "c"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -310,7 +319,10 @@ mod tests {
         let d = m.inner.a.weight.val().device();
         let x = Tensor::<2>::ones([3, 2], &d);
         let grads = m.inner.b.forward(m.inner.a.forward(x)).sum().backward();
-        assert!(m.inner.a.weight.val().grad(&grads).is_none(), "frozen weight got a gradient");
+        assert!(
+            m.inner.a.weight.val().grad(&grads).is_none(),
+            "frozen weight got a gradient"
+        );
         assert!(m.inner.b.weight.val().grad(&grads).is_some());
         // Unfreezing restores gradients.
         let m = g.apply_freezing(m, &BTreeMap::new());
@@ -332,7 +344,10 @@ mod tests {
             },
         );
         let lr = g.learning_rates(2.0, &s);
-        assert_eq!(lr.lr_from_param(m.inner.a.weight.id, Some("inner.a.weight")), 2.0);
+        assert_eq!(
+            lr.lr_from_param(m.inner.a.weight.id, Some("inner.a.weight")),
+            2.0
+        );
         let b = lr.lr_from_param(m.inner.b.bias.as_ref().unwrap().id, Some("inner.b.bias"));
         assert!((b - 0.2).abs() < 1e-12, "{b}");
     }

@@ -73,7 +73,6 @@ impl<O: Objective> Phase<O> {
         self.groups.entry(group.to_string()).or_default().lr_mult = mult;
         self
     }
-
 }
 
 impl<O> Phase<O> {

@@ -30,8 +30,10 @@ struct PhaseCurves {
     psnr: BTreeMap<String, Vec<(f64, f64)>>,
 }
 
-/// Splits the metrics history into phases, in the order they ran.
-fn phases(history: &[serde_json::Value]) -> Vec<PhaseCurves> {
+/// Splits the metrics history into phases, in the order they ran. The loss panel shows the
+/// weighted total and the `terms` (the task's loss terms); PSNRs go to their own axis; other
+/// metrics (ray counts, hit rates, SSIM) stay in `metrics.jsonl`, off a log axis of losses.
+fn phases(history: &[serde_json::Value], terms: &[&str]) -> Vec<PhaseCurves> {
     let mut out: Vec<PhaseCurves> = Vec::new();
     for rec in history {
         let Some(obj) = rec.as_object() else { continue };
@@ -47,7 +49,8 @@ fn phases(history: &[serde_json::Value]) -> Vec<PhaseCurves> {
         }
         let cur = out.last_mut().expect("pushed above");
         for (k, v) in obj {
-            if matches!(k.as_str(), "step" | "phase" | "lr" | "ms") {
+            let is_loss = k == "loss" || terms.contains(&k.as_str());
+            if !is_loss && !k.ends_with("psnr") {
                 continue;
             }
             let Some(v) = v.as_f64().filter(|v| v.is_finite()) else {
@@ -57,7 +60,10 @@ fn phases(history: &[serde_json::Value]) -> Vec<PhaseCurves> {
                 cur.psnr.entry(k.clone()).or_default().push((step, v));
             } else if v > 0.0 {
                 let name = if k == "loss" { "total (weighted)" } else { k };
-                cur.losses.entry(name.to_string()).or_default().push((step, v));
+                cur.losses
+                    .entry(name.to_string())
+                    .or_default()
+                    .push((step, v));
             }
         }
     }
@@ -89,9 +95,9 @@ fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 }
 
 /// Draws the history of a run (records of `metrics.jsonl`) into a PNG at `path`, atomically.
-pub fn plot_history(history: &[serde_json::Value], path: &Path) -> Result<()> {
+pub fn plot_history(history: &[serde_json::Value], terms: &[&str], path: &Path) -> Result<()> {
     register_font();
-    let phases = phases(history);
+    let phases = phases(history, terms);
     let rows = phases.len().max(1) as u32;
     let (w, h) = (1100u32, 330 * rows + 10);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -151,10 +157,7 @@ where
     };
     let (y0, y1) = (y0 * 0.8, y1 * 1.25);
     let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!("{}: losses", phase.name),
-            (FAMILY, 18).into_font(),
-        )
+        .caption(format!("{}: losses", phase.name), (FAMILY, 18).into_font())
         .margin(8)
         .x_label_area_size(36)
         .y_label_area_size(70)
@@ -247,16 +250,20 @@ mod tests {
         let h: Vec<serde_json::Value> = vec![
             serde_json::json!({"step": 9, "phase": "fit", "mse": 0.1, "psnr": 10.0, "loss": 0.1, "lr": 1e-3, "ms": 3.0}),
             serde_json::json!({"step": 19, "phase": "fit", "mse": 0.01, "psnr": 20.0, "loss": 0.01, "lr": 1e-3, "ms": 3.0}),
-            serde_json::json!({"step": 29, "phase": "stylize", "style": 2.0, "content": 1.0, "loss": 5.0}),
+            serde_json::json!({"step": 29, "phase": "stylize", "style": 2.0, "content": 1.0, "loss": 5.0, "rays": 4096.0}),
         ];
-        let p = phases(&h);
+        let terms = ["mse", "style", "content"];
+        let p = phases(&h, &terms);
         assert_eq!(p.len(), 2);
         assert_eq!(p[0].psnr["psnr"], vec![(9.0, 10.0), (19.0, 20.0)]);
         assert!(p[0].losses.contains_key("mse") && !p[0].losses.contains_key("lr"));
-        assert!(p[1].psnr.is_empty() && p[1].losses.len() == 3);
+        assert!(
+            p[1].psnr.is_empty() && p[1].losses.len() == 3,
+            "rays is not a loss"
+        );
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("curve.png");
-        plot_history(&h, &out).unwrap();
+        plot_history(&h, &terms, &out).unwrap();
         let img = image::open(&out).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (1100, 670));
         // Something besides the white background was drawn in both rows.

@@ -62,8 +62,11 @@ pub trait Task {
     fn terms(&self, objective: Self::Objective) -> &'static [&'static str];
 
     /// The loss terms of one step.
-    fn losses(&mut self, model: &Self::Model, step: &StepContext<Self::Objective>)
-    -> Result<LossTerms>;
+    fn losses(
+        &mut self,
+        model: &Self::Model,
+        step: &StepContext<Self::Objective>,
+    ) -> Result<LossTerms>;
 
     /// Runs after the optimizer step (refresh caches that depend on the model, evaluate on
     /// held-out data); returns numbers to log for this step.

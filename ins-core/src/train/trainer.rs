@@ -95,6 +95,14 @@ fn adam() -> ModuleOptimizer {
     AdamConfig::new().with_epsilon(1e-8).init()
 }
 
+/// The trainer's Adam with the state a checkpoint's `optim.bpk` (at `path`) holds.
+/// Burn's reader panics on some damaged states; that becomes an error naming the file.
+pub fn restore_adam(bytes: Vec<u8>, path: &std::path::Path) -> Result<ModuleOptimizer, TrainError> {
+    crate::contain::contain(|| adam().from_bytes(burn::tensor::Bytes::from_bytes_vec(bytes)))
+        .map_err(|e| TrainError::checkpoint(path, format!("damaged optimizer state: {e}")))?
+        .map_err(|e| TrainError::checkpoint(path, e))
+}
+
 impl<O: Objective> Trainer<O> {
     /// A trainer for `phases`.
     pub fn new(phases: Vec<Phase<O>>, opts: TrainOptions) -> Self {
@@ -180,7 +188,7 @@ impl<O: Objective> Trainer<O> {
             if let Some(task_state) = task_state {
                 state.step = step;
                 self.save(&store, &model, &optim, &state, task_state)?;
-                self.write_plot(&state);
+                self.write_plot(&state, task);
             }
             let grads = GradientsParams::from_grads(values.total.backward(), &model);
             model = optim.step(groups.learning_rates(lr, &phase.groups), model, grads);
@@ -225,7 +233,7 @@ impl<O: Objective> Trainer<O> {
             });
         }
         self.save(&store, &model, &optim, &state, task.save_state()?)?;
-        self.write_plot(&state);
+        self.write_plot(&state, task);
         Ok(TrainOutcome {
             model,
             steps: step,
@@ -261,9 +269,7 @@ impl<O: Objective> Trainer<O> {
         };
         let ckpt = CheckpointStore::load_dir(&dir)?;
         let model = load_module_bytes(model, ckpt.model, &dir.join("model.bpk"))?;
-        let optim = adam()
-            .from_bytes(burn::tensor::Bytes::from_bytes_vec(ckpt.optim))
-            .map_err(|e| TrainError::checkpoint(dir.join("optim.bpk"), e))?;
+        let optim = restore_adam(ckpt.optim, &dir.join("optim.bpk"))?;
         let state: TrainerState = serde_json::from_value(ckpt.state)
             .map_err(|e| TrainError::checkpoint(dir.join("state.json"), e))?;
         if let Some(bytes) = ckpt.task {
@@ -296,9 +302,13 @@ impl<O: Objective> Trainer<O> {
     }
 
     /// Redraws `loss_curve.png`. A plot that cannot be drawn is reported, not fatal.
-    fn write_plot(&self, state: &TrainerState) {
+    fn write_plot<T: Task<Objective = O>>(&self, state: &TrainerState, task: &T) {
         let path = self.opts.out_dir.join("loss_curve.png");
-        if let Err(e) = plot_history(&state.history, &path) {
+        let mut terms: Vec<&str> = Vec::new();
+        for phase in &self.phases {
+            terms.extend_from_slice(task.terms(phase.objective));
+        }
+        if let Err(e) = plot_history(&state.history, &terms, &path) {
             eprintln!("warning: could not draw {}: {e:#}", path.display());
         }
     }

@@ -111,11 +111,17 @@ impl IdrRunConfig {
     pub fn kind(&self) -> Result<IdrKind> {
         match (&self.scene, &self.from) {
             (Some(_), None) if self.styles.is_empty() => Ok(IdrKind::Pretrain),
-            (Some(_), None) => bail!("--style needs --from RUN (stylize a pretrained IDR run); pretrain with --scene first"),
+            (Some(_), None) => bail!(
+                "--style needs --from RUN (stylize a pretrained IDR run); pretrain with --scene first"
+            ),
             (None, Some(_)) if !self.styles.is_empty() => Ok(IdrKind::Stylize),
             (None, Some(_)) => bail!("stylizing (--from) needs at least one --style image"),
-            (Some(_), Some(_)) => bail!("give either --scene (pretrain) or --from (stylize), not both"),
-            (None, None) => bail!("give --scene DIR to pretrain a surface, or --from RUN --style IMG to stylize one"),
+            (Some(_), Some(_)) => {
+                bail!("give either --scene (pretrain) or --from (stylize), not both")
+            }
+            (None, None) => bail!(
+                "give --scene DIR to pretrain a surface, or --from RUN --style IMG to stylize one"
+            ),
         }
     }
 

@@ -115,7 +115,15 @@ pub fn render_camera(
     device: &Device,
 ) -> Result<SurfaceView> {
     let rays = camera_rays(camera, |o, d| scene.ray_range(o, d));
-    render_rays(model, &rays, camera.width as usize, camera.height as usize, code, trace, device)
+    render_rays(
+        model,
+        &rays,
+        camera.width as usize,
+        camera.height as usize,
+        code,
+        trace,
+        device,
+    )
 }
 
 /// A held-out view rendered and scored.
@@ -155,7 +163,12 @@ impl SurfaceEval {
             height: r.height,
             data,
         };
-        RgbImage::hstack(&[img(self.photo.clone()), r.image(), r.normal_image(), img(sil)])
+        RgbImage::hstack(&[
+            img(self.photo.clone()),
+            r.image(),
+            r.normal_image(),
+            img(sil),
+        ])
     }
 }
 
@@ -171,7 +184,10 @@ pub fn evaluate_views(
 ) -> Result<Vec<SurfaceEval>> {
     let mut out = Vec::new();
     for &view in views {
-        let v = scene.views.get(view).ok_or_else(|| anyhow::anyhow!("view {view} does not exist"))?;
+        let v = scene
+            .views
+            .get(view)
+            .ok_or_else(|| anyhow::anyhow!("view {view} does not exist"))?;
         let render = render_camera(model, scene, &v.camera, code.clone(), trace, device)?;
         let photo = v.image.to_f32();
         let mask: Vec<bool> = match (&v.mask, masked) {
@@ -186,7 +202,8 @@ pub fn evaluate_views(
             union += (m || h) as usize;
             if m {
                 for c in 0..3 {
-                    se += ((render.rgb[i * 3 + c].clamp(0.0, 1.0) - photo[i * 3 + c]) as f64).powi(2);
+                    se +=
+                        ((render.rgb[i * 3 + c].clamp(0.0, 1.0) - photo[i * 3 + c]) as f64).powi(2);
                 }
                 count += 3;
             }

@@ -67,7 +67,11 @@ pub fn sample_narrow_band(res: usize, sdf: &mut dyn FnMut(&[f32]) -> Vec<f32>) -
     for k in 0..cres {
         for j in 0..cres {
             for i in 0..cres {
-                pts.extend([coord(fine_at(i), res), coord(fine_at(j), res), coord(fine_at(k), res)]);
+                pts.extend([
+                    coord(fine_at(i), res),
+                    coord(fine_at(j), res),
+                    coord(fine_at(k), res),
+                ]);
             }
         }
     }
@@ -78,15 +82,35 @@ pub fn sample_narrow_band(res: usize, sdf: &mut dyn FnMut(&[f32]) -> Vec<f32>) -
     let mut exact_points = Vec::new();
     let mut exact_index = Vec::new();
     for k in 0..res {
-        let (ck, fk) = ((k / step).min(cres - 2), (k as f32 / step as f32 - ((k / step).min(cres - 2)) as f32).min(1.0));
+        let (ck, fk) = (
+            (k / step).min(cres - 2),
+            (k as f32 / step as f32 - ((k / step).min(cres - 2)) as f32).min(1.0),
+        );
         for j in 0..res {
-            let (cj, fj) = ((j / step).min(cres - 2), (j as f32 / step as f32 - ((j / step).min(cres - 2)) as f32).min(1.0));
+            let (cj, fj) = (
+                (j / step).min(cres - 2),
+                (j as f32 / step as f32 - ((j / step).min(cres - 2)) as f32).min(1.0),
+            );
             for i in 0..res {
-                let (ci, fi) = ((i / step).min(cres - 2), (i as f32 / step as f32 - ((i / step).min(cres - 2)) as f32).min(1.0));
+                let (ci, fi) = (
+                    (i / step).min(cres - 2),
+                    (i as f32 / step as f32 - ((i / step).min(cres - 2)) as f32).min(1.0),
+                );
                 let c = |a: usize, b: usize, d: usize| coarse[cidx(ci + a, cj + b, ck + d)];
-                let corners = [c(0, 0, 0), c(1, 0, 0), c(0, 1, 0), c(1, 1, 0), c(0, 0, 1), c(1, 0, 1), c(0, 1, 1), c(1, 1, 1)];
+                let corners = [
+                    c(0, 0, 0),
+                    c(1, 0, 0),
+                    c(0, 1, 0),
+                    c(1, 1, 0),
+                    c(0, 0, 1),
+                    c(1, 0, 1),
+                    c(0, 1, 1),
+                    c(1, 1, 1),
+                ];
                 let near = corners.iter().any(|v| v.abs() < 1.5 * cell) || {
-                    let (lo, hi) = corners.iter().fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+                    let (lo, hi) = corners
+                        .iter()
+                        .fold((f32::MAX, f32::MIN), |(a, b), &v| (a.min(v), b.max(v)));
                     lo < 0.0 && hi > 0.0
                 };
                 let id = i + res * (j + res * k);
@@ -104,7 +128,10 @@ pub fn sample_narrow_band(res: usize, sdf: &mut dyn FnMut(&[f32]) -> Vec<f32>) -
             }
         }
     }
-    for (chunk_p, chunk_i) in exact_points.chunks(3 * 262_144).zip(exact_index.chunks(262_144)) {
+    for (chunk_p, chunk_i) in exact_points
+        .chunks(3 * 262_144)
+        .zip(exact_index.chunks(262_144))
+    {
         for (v, &id) in clipped(sdf, chunk_p).into_iter().zip(chunk_i) {
             values[id] = v;
         }
@@ -145,7 +172,10 @@ pub fn extract_mesh(
             .convert::<f32>()
             .try_into_vec::<f32>()
             .map_err(|e| anyhow::anyhow!("reading vertex colours: {e:?}"))?;
-        colors.extend(v.chunks_exact(3).map(|c| std::array::from_fn(|k| (c[k].clamp(0.0, 1.0) * 255.0).round() as u8)));
+        colors.extend(
+            v.chunks_exact(3)
+                .map(|c| std::array::from_fn(|k| (c[k].clamp(0.0, 1.0) * 255.0).round() as u8)),
+        );
     }
     Ok((mesh, colors))
 }
@@ -160,17 +190,38 @@ mod tests {
         let mut exact_calls = 0usize;
         let mut sdf = |p: &[f32]| {
             exact_calls += p.len() / 3;
-            p.chunks_exact(3).map(|q| (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt() - r).collect::<Vec<f32>>()
+            p.chunks_exact(3)
+                .map(|q| (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt() - r)
+                .collect::<Vec<f32>>()
         };
         let res = 97;
         let values = sample_narrow_band(res, &mut sdf);
-        let mesh = marching_cubes(&Grid { res: [res; 3], min: [-1.0; 3], max: [1.0; 3], values: &values }, 0.0);
+        let mesh = marching_cubes(
+            &Grid {
+                res: [res; 3],
+                min: [-1.0; 3],
+                max: [1.0; 3],
+                values: &values,
+            },
+            0.0,
+        );
         let area = 4.0 * std::f64::consts::PI * (r as f64).powi(2);
         let volume = 4.0 / 3.0 * std::f64::consts::PI * (r as f64).powi(3);
-        assert!((mesh.area() / area - 1.0).abs() < 0.02, "area {} vs {area}", mesh.area());
-        assert!((mesh.volume() / volume - 1.0).abs() < 0.02, "volume {} vs {volume}", mesh.volume());
+        assert!(
+            (mesh.area() / area - 1.0).abs() < 0.02,
+            "area {} vs {area}",
+            mesh.area()
+        );
+        assert!(
+            (mesh.volume() / volume - 1.0).abs() < 0.02,
+            "volume {} vs {volume}",
+            mesh.volume()
+        );
         // Far fewer exact evaluations than samples.
-        assert!(exact_calls < res * res * res / 3, "{exact_calls} exact evaluations");
+        assert!(
+            exact_calls < res * res * res / 3,
+            "{exact_calls} exact evaluations"
+        );
     }
 
     #[test]

@@ -65,7 +65,10 @@ pub struct IdrModel {
     pub stylizer: Option<SurfaceStylizer>,
 }
 
-const PLAIN: &[GroupSpec] = &[GroupSpec::new("sdf", &["sdf"]), GroupSpec::new("color", &["color"])];
+const PLAIN: &[GroupSpec] = &[
+    GroupSpec::new("sdf", &["sdf"]),
+    GroupSpec::new("color", &["color"]),
+];
 const STYLIZED: &[GroupSpec] = &[
     GroupSpec::new("sdf", &["sdf"]),
     GroupSpec::new("color", &["color"]),
@@ -75,7 +78,11 @@ const STYLIZED: &[GroupSpec] = &[
 
 impl Optimizable for IdrModel {
     fn groups(&self) -> &'static [GroupSpec] {
-        if self.stylizer.is_some() { STYLIZED } else { PLAIN }
+        if self.stylizer.is_some() {
+            STYLIZED
+        } else {
+            PLAIN
+        }
     }
 }
 
@@ -103,10 +110,17 @@ impl IdrModel {
                     .with_log2_table(17)
                     .with_base_resolution(16)
                     .with_max_resolution(1024);
-                let net = SdfNet::Grid(SdfGridConfig::new(grid).with_radius(arch.radius).init(1.0, device));
+                let net = SdfNet::Grid(
+                    SdfGridConfig::new(grid)
+                        .with_radius(arch.radius)
+                        .init(1.0, device),
+                );
+                // One octave of view direction: with the grid's sharper features, more octaves let
+                // the colour fit each training view on its own and miss the views between them.
                 let c = SurfaceColorConfig::new(net.d_features())
                     .with_d_hidden(64)
                     .with_depth(2)
+                    .with_dir_freqs(1)
                     .init(device);
                 (net, c)
             }
@@ -119,7 +133,13 @@ impl IdrModel {
     }
 
     /// Adds a fresh SIM and AM (identity) for `n_styles` styles.
-    pub fn with_stylizer(mut self, n_styles: usize, width: usize, position_freqs: usize, device: &Device) -> Self {
+    pub fn with_stylizer(
+        mut self,
+        n_styles: usize,
+        width: usize,
+        position_freqs: usize,
+        device: &Device,
+    ) -> Self {
         let d_pos = FourierEncoding::new(position_freqs).d_out(3);
         let sim = SimConfig::new(n_styles)
             .with_d_hidden(width)
@@ -145,7 +165,14 @@ impl IdrModel {
 
     /// Colour at surface points `x [N, 3]` with normals `n [N, 3]`, seen along unit `dirs`,
     /// with SDF features `f [N, F]`, under each style code of `codes [S, n_styles]`: `[S, N, 3]`.
-    pub fn shade(&self, x: Tensor<2>, n: Tensor<2>, dirs: Tensor<2>, f: Tensor<2>, codes: Option<Tensor<2>>) -> Tensor<3> {
+    pub fn shade(
+        &self,
+        x: Tensor<2>,
+        n: Tensor<2>,
+        dirs: Tensor<2>,
+        f: Tensor<2>,
+        codes: Option<Tensor<2>>,
+    ) -> Tensor<3> {
         let [count, _] = x.dims();
         let (Some(st), Some(codes)) = (&self.stylizer, codes) else {
             return self.color.forward(x, n, dirs, f).reshape([1, count, 3]);
@@ -153,12 +180,23 @@ impl IdrModel {
         let [s, k] = codes.dims();
         let rep = |t: Tensor<2>| -> Tensor<2> {
             let w = t.dims()[1];
-            if s == 1 { t } else { t.unsqueeze_dim::<3>(0).expand([s, count, w]).reshape([s * count, w]) }
+            if s == 1 {
+                t
+            } else {
+                t.unsqueeze_dim::<3>(0)
+                    .expand([s, count, w])
+                    .reshape([s * count, w])
+            }
         };
         let pos = FourierEncoding::new(st.position_freqs).encode(x.clone());
-        let code_rows = codes.reshape([s, 1, k]).expand([s, count, k]).reshape([s * count, k]);
+        let code_rows = codes
+            .reshape([s, 1, k])
+            .expand([s, count, k])
+            .reshape([s * count, k]);
         let style = st.sim.forward(code_rows, Some(rep(pos)));
         let f = st.am.forward(rep(f), style);
-        self.color.forward(rep(x), rep(n), rep(dirs), f).reshape([s, count, 3])
+        self.color
+            .forward(rep(x), rep(n), rep(dirs), f)
+            .reshape([s, count, 3])
     }
 }

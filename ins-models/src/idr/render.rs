@@ -42,7 +42,12 @@ pub fn surface_point(sdf: &SdfNet, x0: Tensor<2>, v: Tensor<2>) -> Tensor<2> {
     let (f0, _, g0) = sdf.forward_with_gradient(x0.clone());
     let denom = (g0.detach() * v.clone()).sum_dim(1).reshape([h]);
     // Keep the step finite at grazing hits: |∇f · v| ≥ 0.01, sign kept (0 counts as +).
-    let sign = denom.clone().lower_elem(0.0).float().mul_scalar(-2.0).add_scalar(1.0);
+    let sign = denom
+        .clone()
+        .lower_elem(0.0)
+        .float()
+        .mul_scalar(-2.0)
+        .add_scalar(1.0);
     let denom = (denom.abs().clamp_min(1e-2) * sign).reshape([h, 1]);
     x0 - v * (f0.reshape([h, 1]) / denom)
 }
@@ -79,7 +84,9 @@ pub fn render_surface(
     let traced = trace(model, rays, opts, device);
     let hits: Vec<usize> = (0..r).filter(|&i| traced.hit[i]).collect();
     let s = codes.as_ref().map_or(1, |c| c.dims()[0]);
-    let bg = Tensor::<1>::from_floats(background, device).reshape([1, 1, 3]).expand([s, 1, 3]);
+    let bg = Tensor::<1>::from_floats(background, device)
+        .reshape([1, 1, 3])
+        .expand([s, 1, 3]);
     if hits.is_empty() {
         let rgb = bg.expand([s, r, 3]).reshape([s * r, 3]);
         return SurfaceRender {
@@ -90,7 +97,10 @@ pub fn render_surface(
         };
     }
     let h = hits.len();
-    let x0: Vec<f32> = hits.iter().flat_map(|&i| rays.point(i, traced.t[i]).to_array()).collect();
+    let x0: Vec<f32> = hits
+        .iter()
+        .flat_map(|&i| rays.point(i, traced.t[i]).to_array())
+        .collect();
     let dirs: Vec<Vec3> = hits.iter().map(|&i| rays.directions[i]).collect();
     let x0 = tensor2(x0, h, 3, device);
     let v = tensor2(flatten(&dirs), h, 3, device);
@@ -108,7 +118,9 @@ pub fn render_surface(
         index[i] = k as i64;
     }
     let index = Tensor::<1, Int>::from_data(TensorData::new(index, [r]), device);
-    let rgb = Tensor::cat(vec![colour, bg], 1).select(1, index).reshape([s * r, 3]);
+    let rgb = Tensor::cat(vec![colour, bg], 1)
+        .select(1, index)
+        .reshape([s * r, 3]);
     SurfaceRender {
         rgb,
         traced,
@@ -130,7 +142,12 @@ mod tests {
     fn surface_point_has_the_implicit_function_gradient() {
         let ad = Device::flex().autodiff();
         ad.seed(21);
-        let mut mlp = SdfMlpConfig::new().with_d_hidden(32).with_depth(3).with_skip_at(9).with_d_features(4).init(&ad);
+        let mut mlp = SdfMlpConfig::new()
+            .with_d_hidden(32)
+            .with_depth(3)
+            .with_skip_at(9)
+            .with_d_features(4)
+            .init(&ad);
         // Make the surface wobble so the derivative is not trivial.
         let w = mlp.layers[3].weight.val();
         let bump = Tensor::random(w.dims(), burn::tensor::Distribution::Normal(0.0, 0.02), &ad);
@@ -140,12 +157,18 @@ mod tests {
         for (x, y) in [(0.05f32, 0.1f32), (-0.2, 0.15), (0.1, -0.25)] {
             rays.push(Vec3::new(x, y, 2.0), Vec3::NEG_Z, 0.5, 3.5);
         }
-        let opts = TraceOptions { eps: 1e-7, max_steps: 200, ..Default::default() };
+        let opts = TraceOptions {
+            eps: 1e-7,
+            max_steps: 200,
+            ..Default::default()
+        };
         let hits_for = |n: &SdfNet| -> Vec<f32> {
             let inner = n.valid();
             let t = sphere_trace(&rays, &opts, |p| sdf_at(&inner, p, &Device::flex()));
             assert!(t.hit.iter().all(|&h| h));
-            (0..3).flat_map(|i| rays.point(i, t.t[i]).to_array()).collect()
+            (0..3)
+                .flat_map(|i| rays.point(i, t.t[i]).to_array())
+                .collect()
         };
         let x0 = hits_for(&net);
         let x0t = Tensor::<1>::from_floats(x0.as_slice(), &ad).reshape([3, 3]);
@@ -154,8 +177,21 @@ mod tests {
         let x = surface_point(&net, x0t, v);
         let grads = x.slice([0..3, 2..3]).sum().backward();
         let SdfNet::Mlp(m) = &net else { unreachable!() };
-        let analytic = m.layers[3].weight.val().grad(&grads).unwrap().into_data().try_to_vec::<f32>().unwrap();
-        let base = m.layers[3].weight.val().inner().into_data().try_to_vec::<f32>().unwrap();
+        let analytic = m.layers[3]
+            .weight
+            .val()
+            .grad(&grads)
+            .unwrap()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        let base = m.layers[3]
+            .weight
+            .val()
+            .inner()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
         let dims = m.layers[3].weight.dims();
         let mut idx: Vec<usize> = (0..analytic.len()).collect();
         idx.sort_by(|&a, &b| analytic[b].abs().total_cmp(&analytic[a].abs()));
@@ -165,12 +201,18 @@ mod tests {
                 let mut vals = base.clone();
                 vals[i] += s;
                 let mut n2 = m.clone();
-                n2.layers[3].weight = Param::from_tensor(Tensor::<1>::from_floats(vals.as_slice(), &ad).reshape(dims));
+                n2.layers[3].weight = Param::from_tensor(
+                    Tensor::<1>::from_floats(vals.as_slice(), &ad).reshape(dims),
+                );
                 let p = hits_for(&SdfNet::Mlp(n2));
                 p[2] + p[5] + p[8]
             };
             let fd = (z(eps) - z(-eps)) / (2.0 * eps);
-            assert!((fd - analytic[i]).abs() < 5e-2 * analytic[i].abs().max(1e-2), "entry {i}: fd {fd} vs {}", analytic[i]);
+            assert!(
+                (fd - analytic[i]).abs() < 5e-2 * analytic[i].abs().max(1e-2),
+                "entry {i}: fd {fd} vs {}",
+                analytic[i]
+            );
         }
     }
 }

@@ -22,7 +22,12 @@ use crate::nerf::config::auto_downscale;
 
 /// Loads a DTU/IDR scene for surface reconstruction: the format must be DTU (unit-sphere frame
 /// and masks), masks must exist unless `no_mask`, and every `holdout`-th view goes to val.
-pub fn load_scene(path: &Path, downscale: u32, holdout: usize, no_mask: bool) -> Result<(Scene, u32)> {
+pub fn load_scene(
+    path: &Path,
+    downscale: u32,
+    holdout: usize,
+    no_mask: bool,
+) -> Result<(Scene, u32)> {
     let format = detect_format(path)?;
     if format != SceneFormat::Dtu {
         bail!(
@@ -61,25 +66,12 @@ pub fn load_scene(path: &Path, downscale: u32, holdout: usize, no_mask: bool) ->
     Ok((scene, factor))
 }
 
-fn write_config(cfg: &IdrRunConfig, out: &Path, resume: bool) -> Result<()> {
-    let path = out.join("config.json");
-    if resume && path.exists() {
-        let saved = IdrRunConfig::from_file(&path)?;
-        if saved != *cfg {
-            bail!(
-                "{}: the run was started with another configuration; resume with the same options (or --config {})",
-                path.display(),
-                path.display()
-            );
-        }
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    ins_io::write_atomic(&path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
-    Ok(())
-}
-
 /// Pretrains a surface on `cfg.scene` into `opts.out_dir`.
-pub fn pretrain(cfg: &IdrRunConfig, device: &Device, opts: TrainOptions) -> Result<TrainOutcome<IdrModel>> {
+pub fn pretrain(
+    cfg: &IdrRunConfig,
+    device: &Device,
+    opts: TrainOptions,
+) -> Result<TrainOutcome<IdrModel>> {
     let scene_path = cfg.scene.clone().context("pretraining needs --scene DIR")?;
     let (scene, factor) = load_scene(&scene_path, cfg.downscale, cfg.holdout, cfg.no_mask)?;
     let mut cfg = cfg.clone();
@@ -87,7 +79,7 @@ pub fn pretrain(cfg: &IdrRunConfig, device: &Device, opts: TrainOptions) -> Resu
     cfg.steps = cfg.steps_for(IdrKind::Pretrain);
     cfg.lr = cfg.lr_for(IdrKind::Pretrain);
     let out = opts.out_dir.clone();
-    write_config(&cfg, &out, opts.resume)?;
+    crate::config::write_run_config(&cfg, &out, opts.resume)?;
     let ad = device.clone().autodiff();
     let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || IdrModel::new(&cfg.arch(), &ad));
     let views = scene.split(Split::Val).to_vec();
@@ -123,12 +115,28 @@ pub fn pretrain(cfg: &IdrRunConfig, device: &Device, opts: TrainOptions) -> Resu
 
 fn final_pictures(model: &IdrModel, task: &IdrTask, out: &Path, device: &Device) -> Result<()> {
     let views: Vec<usize> = if task.eval_views.is_empty() {
-        task.scene.split(Split::Train).iter().copied().take(2).collect()
+        task.scene
+            .split(Split::Train)
+            .iter()
+            .copied()
+            .take(2)
+            .collect()
     } else {
         task.eval_views.iter().copied().take(6).collect()
     };
-    let code = task.style.as_ref().map(|s| s.codes.clone().slice([0..1]).inner().to_device(device));
-    let evals = evaluate_views(&model.valid().to_device(device), &task.scene, &views, code, task.masked, &task.trace, device)?;
+    let code = task
+        .style
+        .as_ref()
+        .map(|s| s.codes.clone().slice([0..1]).inner().to_device(device));
+    let evals = evaluate_views(
+        &model.valid().to_device(device),
+        &task.scene,
+        &views,
+        code,
+        task.masked,
+        &task.trace,
+        device,
+    )?;
     save_pictures(&evals, &out.join("val").join("final.png"))
 }
 
@@ -151,19 +159,34 @@ impl IdrRun {
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let config_path = dir.join("config.json");
         if !config_path.is_file() {
-            bail!("{} is not an IDR run folder (no config.json)", dir.display());
+            bail!(
+                "{} is not an IDR run folder (no config.json)",
+                dir.display()
+            );
         }
-        let config = IdrRunConfig::from_file(&config_path).with_context(|| format!("{} is not an IDR run", dir.display()))?;
+        let config = IdrRunConfig::from_file(&config_path)
+            .with_context(|| format!("{} is not an IDR run", dir.display()))?;
         let base = match config.kind()? {
             IdrKind::Pretrain => None,
             IdrKind::Stylize => {
                 let from = config.from.clone().expect("kind checked");
-                Some(IdrRunConfig::from_file(&from.join("config.json")).with_context(|| format!("the base run of {}", dir.display()))?)
+                Some(
+                    IdrRunConfig::from_file(&from.join("config.json"))
+                        .with_context(|| format!("the base run of {}", dir.display()))?,
+                )
             }
         };
         let scene_cfg = base.as_ref().unwrap_or(&config);
-        let scene_path = scene_cfg.scene.clone().context("the base run has no scene")?;
-        let (scene, _) = load_scene(&scene_path, scene_cfg.downscale, scene_cfg.holdout, scene_cfg.no_mask)?;
+        let scene_path = scene_cfg
+            .scene
+            .clone()
+            .context("the base run has no scene")?;
+        let (scene, _) = load_scene(
+            &scene_path,
+            scene_cfg.downscale,
+            scene_cfg.holdout,
+            scene_cfg.no_mask,
+        )?;
         let store = CheckpointStore::new(dir.join("checkpoints"), 2);
         let latest = store
             .latest_dir()?
@@ -171,7 +194,12 @@ impl IdrRun {
         let ckpt = CheckpointStore::load_dir(&latest)?;
         let mut model = IdrModel::new(&scene_cfg.arch(), device);
         if base.is_some() {
-            model = model.with_stylizer(config.styles.len(), config.sim_width, config.position_freqs, device);
+            model = model.with_stylizer(
+                config.styles.len(),
+                config.sim_width,
+                config.position_freqs,
+                device,
+            );
         }
         let model = load_module_bytes(model, ckpt.model, &latest.join("model.bpk"))?;
         Ok(Self {
@@ -195,17 +223,34 @@ impl IdrRun {
 }
 
 /// Stylizes the pretrained run `cfg.from` into `opts.out_dir`.
-pub fn stylize(cfg: &IdrRunConfig, vgg: Vgg, device: &Device, opts: TrainOptions) -> Result<TrainOutcome<IdrModel>> {
+pub fn stylize(
+    cfg: &IdrRunConfig,
+    vgg: Vgg,
+    device: &Device,
+    opts: TrainOptions,
+) -> Result<TrainOutcome<IdrModel>> {
     cfg.kind()?;
     let from = cfg.from.clone().context("stylizing needs --from RUN")?;
     let base = IdrRun::load(&from, device)?;
     if base.base.is_some() {
-        bail!("{} is already a stylized run; stylize its pretrained run instead", from.display());
+        bail!(
+            "{} is already a stylized run; stylize its pretrained run instead",
+            from.display()
+        );
     }
     if cfg.sdf != base.config.sdf {
-        bail!("--sdf {} does not match the pretrained run {} (--sdf {})", cfg.sdf, from.display(), base.config.sdf);
+        bail!(
+            "--sdf {} does not match the pretrained run {} (--sdf {})",
+            cfg.sdf,
+            from.display(),
+            base.config.sdf
+        );
     }
-    let styles: Vec<RgbImage> = cfg.styles.iter().map(|p| RgbImage::load(p)).collect::<Result<_>>()?;
+    let styles: Vec<RgbImage> = cfg
+        .styles
+        .iter()
+        .map(|p| RgbImage::load(p))
+        .collect::<Result<_>>()?;
     let mut cfg = cfg.clone();
     cfg.downscale = base.config.downscale;
     cfg.holdout = base.config.holdout;
@@ -214,11 +259,14 @@ pub fn stylize(cfg: &IdrRunConfig, vgg: Vgg, device: &Device, opts: TrainOptions
     cfg.steps = cfg.steps_for(IdrKind::Stylize);
     cfg.lr = cfg.lr_for(IdrKind::Stylize);
     let out = opts.out_dir.clone();
-    write_config(&cfg, &out, opts.resume)?;
+    crate::config::write_run_config(&cfg, &out, opts.resume)?;
     let ad = device.clone().autodiff();
     let n = styles.len();
     let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || {
-        base.model.clone().to_device(&ad).with_stylizer(n, cfg.sim_width, cfg.position_freqs, &ad)
+        base.model
+            .clone()
+            .to_device(&ad)
+            .with_stylizer(n, cfg.sim_width, cfg.position_freqs, &ad)
     });
     let vgg = vgg.to_device(&ad);
     let targets: Vec<StyleTarget> = styles
@@ -246,7 +294,17 @@ pub fn stylize(cfg: &IdrRunConfig, vgg: Vgg, device: &Device, opts: TrainOptions
         patch,
     };
     let views = base.scene.split(Split::Val).to_vec();
-    let mut task = IdrTask::new(base.scene, cfg.rays, cfg.steps, !cfg.no_mask, Some(style), cfg.eval_every, views, out.join("val"), &ad);
+    let mut task = IdrTask::new(
+        base.scene,
+        cfg.rays,
+        cfg.steps,
+        !cfg.no_mask,
+        Some(style),
+        cfg.eval_every,
+        views,
+        out.join("val"),
+        &ad,
+    );
     let mut phase = Phase::new("stylize", IdrObjective::Stylize, cfg.steps, cfg.lr)
         .weight("style", weights.style)
         .weight("content", weights.content);

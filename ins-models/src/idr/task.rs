@@ -102,12 +102,33 @@ impl IdrTask {
     fn pretrain_losses(&self, model: &IdrModel, step: usize, seed: u64) -> Result<LossTerms> {
         let batch = RaySampler::new(self.rays, seed).sample(&self.scene, Split::Train)?;
         let r = batch.len();
-        let out = render_surface(model, &batch.rays, None, [0.0; 3], &self.trace, true, &self.device);
-        let mask: Vec<f32> = if self.masked { batch.mask.clone() } else { vec![1.0; r] };
+        let out = render_surface(
+            model,
+            &batch.rays,
+            None,
+            [0.0; 3],
+            &self.trace,
+            true,
+            &self.device,
+        );
+        let mask: Vec<f32> = if self.masked {
+            batch.mask.clone()
+        } else {
+            vec![1.0; r]
+        };
         // Colour: L1 over rays that hit inside the mask, normalised by all rays (IDR).
-        let inside: Vec<f32> = (0..r).map(|i| if out.traced.hit[i] && mask[i] > 0.5 { 1.0 } else { 0.0 }).collect();
+        let inside: Vec<f32> = (0..r)
+            .map(|i| {
+                if out.traced.hit[i] && mask[i] > 0.5 {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let inside_t = Tensor::<1>::from_floats(inside.as_slice(), &self.device).reshape([r, 1]);
-        let target = Tensor::<1>::from_floats(batch.rgb.as_flattened(), &self.device).reshape([r, 3]);
+        let target =
+            Tensor::<1>::from_floats(batch.rgb.as_flattened(), &self.device).reshape([r, 3]);
         let rgb = (out.rgb.clone() - target.clone()).abs() * inside_t.clone();
         let rgb_loss = rgb.sum().div_scalar(r as f32);
         // Logged only (weight 0): the MSE inside the mask, read with the other terms.
@@ -128,7 +149,11 @@ impl IdrTask {
                 let pts: Vec<f32> = outside
                     .iter()
                     .flat_map(|&i| {
-                        let t = if out.traced.hit[i] { out.traced.t[i] } else { out.traced.t_min_sdf[i] };
+                        let t = if out.traced.hit[i] {
+                            out.traced.t[i]
+                        } else {
+                            out.traced.t_min_sdf[i]
+                        };
                         batch.rays.point(i, t).to_array()
                     })
                     .collect();
@@ -139,7 +164,8 @@ impl IdrTask {
                 let logits = s.mul_scalar(-alpha);
                 let gt = Tensor::<1>::from_floats(gt.as_slice(), &self.device);
                 // BCE with logits, stable form: max(z, 0) − z·y + log(1 + e^{−|z|}).
-                let bce = logits.clone().clamp_min(0.0) - logits.clone() * gt + logits.abs().neg().exp().add_scalar(1.0).log();
+                let bce = logits.clone().clamp_min(0.0) - logits.clone() * gt
+                    + logits.abs().neg().exp().add_scalar(1.0).log();
                 terms = terms.term("mask", bce.sum().div_scalar(alpha * r as f32));
             } else {
                 terms = terms.term("mask", Tensor::<1>::zeros([1], &self.device));
@@ -148,8 +174,12 @@ impl IdrTask {
         // Eikonal: |∇f| = 1 at random points of the unit sphere's box and at the surface points.
         let mut rng = SmallRng::seed_from_u64(seed ^ 0xe1c0);
         let k = r.min(4096);
-        let pts: Vec<f32> = (0..k * 3).map(|_| rng.random::<f32>() * 2.0 - 1.0).collect();
-        let (_, _, g) = model.sdf.forward_with_gradient(Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]));
+        let pts: Vec<f32> = (0..k * 3)
+            .map(|_| rng.random::<f32>() * 2.0 - 1.0)
+            .collect();
+        let (_, _, g) = model.sdf.forward_with_gradient(
+            Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]),
+        );
         let g = match out.surface_gradients {
             Some(gs) => Tensor::cat(vec![g, gs], 0),
             None => g,
@@ -159,16 +189,37 @@ impl IdrTask {
     }
 
     fn stylize_losses(&self, model: &IdrModel, seed: u64) -> Result<LossTerms> {
-        let style = self.style.as_ref().context("a stylization phase without styles")?;
+        let style = self
+            .style
+            .as_ref()
+            .context("a stylization phase without styles")?;
         let mut sampler = PatchSampler::new(style.patch.size, style.patch.stride, seed);
         let patch = sampler.sample(&self.scene, Split::Train)?;
         let k = style.patch.size as usize;
-        let out = render_surface(model, &patch.batch.rays, Some(style.codes.clone()), [0.0; 3], &self.trace, true, &self.device);
+        let out = render_surface(
+            model,
+            &patch.batch.rays,
+            Some(style.codes.clone()),
+            [0.0; 3],
+            &self.trace,
+            true,
+            &self.device,
+        );
         let s = style.codes.dims()[0];
         let images = out.rgb.reshape([s, k, k, 3]).permute([0, 3, 1, 2]);
         // The photo inside its mask, on the same black background as the render.
-        let mask: Vec<f32> = if self.masked { patch.batch.mask.clone() } else { vec![1.0; k * k] };
-        let photo: Vec<f32> = patch.batch.rgb.iter().zip(&mask).flat_map(|(c, m)| c.map(|v| v * m)).collect();
+        let mask: Vec<f32> = if self.masked {
+            patch.batch.mask.clone()
+        } else {
+            vec![1.0; k * k]
+        };
+        let photo: Vec<f32> = patch
+            .batch
+            .rgb
+            .iter()
+            .zip(&mask)
+            .flat_map(|(c, m)| c.map(|v| v * m))
+            .collect();
         let photo = Tensor::<1>::from_floats(photo.as_slice(), &self.device)
             .reshape([1, k, k, 3])
             .permute([0, 3, 1, 2]);
@@ -200,21 +251,49 @@ impl Task for IdrTask {
         }
     }
 
-    fn after_step(&mut self, model: &IdrModel, step: &StepContext<IdrObjective>) -> Result<Vec<(String, f64)>> {
+    fn after_step(
+        &mut self,
+        model: &IdrModel,
+        step: &StepContext<IdrObjective>,
+    ) -> Result<Vec<(String, f64)>> {
         let done = step.step_in_phase + 1;
-        if self.eval_every == 0 || !done.is_multiple_of(self.eval_every) || self.eval_views.is_empty() {
+        if self.eval_every == 0
+            || !done.is_multiple_of(self.eval_every)
+            || self.eval_views.is_empty()
+        {
             return Ok(Vec::new());
         }
         let m = model.valid();
         let device = self.device.clone().inner();
-        let code = self.style.as_ref().map(|s| s.codes.clone().slice([0..1]).inner());
-        let evals = evaluate_views(&m, &self.scene, &self.eval_views, code, self.masked, &self.trace, &device)?;
-        save_pictures(&evals, &self.eval_dir.join(format!("step_{:06}.png", step.global_step + 1)))?;
+        let code = self
+            .style
+            .as_ref()
+            .map(|s| s.codes.clone().slice([0..1]).inner());
+        let evals = evaluate_views(
+            &m,
+            &self.scene,
+            &self.eval_views,
+            code,
+            self.masked,
+            &self.trace,
+            &device,
+        )?;
+        save_pictures(
+            &evals,
+            &self
+                .eval_dir
+                .join(format!("step_{:06}.png", step.global_step + 1)),
+        )?;
         let n = evals.len().max(1) as f64;
         Ok(vec![
-            ("val_iou".into(), evals.iter().map(|e| e.iou).sum::<f64>() / n),
-            ("val_psnr_mask".into(), evals.iter().map(|e| e.psnr_mask).sum::<f64>() / n),
+            (
+                "val_iou".into(),
+                evals.iter().map(|e| e.iou).sum::<f64>() / n,
+            ),
+            (
+                "val_psnr_mask".into(),
+                evals.iter().map(|e| e.psnr_mask).sum::<f64>() / n,
+            ),
         ])
     }
 }
-

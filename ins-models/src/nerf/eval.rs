@@ -89,7 +89,15 @@ pub fn render_rays(
     let mut start = 0;
     while start < n {
         let end = (start + CHUNK).min(n);
-        let r = render(model, &rays.slice(start, end), sampling, code.clone(), background, None, device);
+        let r = render(
+            model,
+            &rays.slice(start, end),
+            sampling,
+            code.clone(),
+            background,
+            None,
+            device,
+        );
         out.rgb.extend(to_vec(r.fine.rgb)?);
         out.depth.extend(to_vec(r.fine.depth)?);
         out.opacity.extend(to_vec(r.fine.opacity)?);
@@ -164,8 +172,19 @@ pub fn evaluate_views(
 ) -> Result<Vec<ViewEval>> {
     let mut out = Vec::with_capacity(views.len());
     for &view in views {
-        let v = scene.views.get(view).ok_or_else(|| anyhow::anyhow!("view {view} does not exist"))?;
-        let render = render_camera(model, scene, &v.camera, sampling, code.clone(), background, device)?;
+        let v = scene
+            .views
+            .get(view)
+            .ok_or_else(|| anyhow::anyhow!("view {view} does not exist"))?;
+        let render = render_camera(
+            model,
+            scene,
+            &v.camera,
+            sampling,
+            code.clone(),
+            background,
+            device,
+        )?;
         let photo = v.image.to_f32();
         let mse = render
             .rgb

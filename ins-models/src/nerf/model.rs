@@ -141,7 +141,13 @@ impl NerfModel {
 
     /// Adds a fresh SIM and AM (AM = identity) for `n_styles` styles. The MLP variant follows
     /// the authors' sizes (AM feature branch of 4 layers); the grid variant a 2-layer one.
-    pub fn with_stylizer(mut self, n_styles: usize, sim_width: usize, position_freqs: usize, device: &Device) -> Self {
+    pub fn with_stylizer(
+        mut self,
+        n_styles: usize,
+        sim_width: usize,
+        position_freqs: usize,
+        device: &Device,
+    ) -> Self {
         let d_pos = FourierEncoding::new(position_freqs).d_out(3);
         let sim = SimConfig::new(n_styles)
             .with_d_hidden(sim_width)
@@ -174,12 +180,20 @@ impl NerfModel {
         let a = self.aabb;
         let device = x.device();
         let c = Tensor::<1>::from_floats(
-            [(a[0] + a[3]) / 2.0, (a[1] + a[4]) / 2.0, (a[2] + a[5]) / 2.0],
+            [
+                (a[0] + a[3]) / 2.0,
+                (a[1] + a[4]) / 2.0,
+                (a[2] + a[5]) / 2.0,
+            ],
             &device,
         )
         .reshape([1, 3]);
         let s = Tensor::<1>::from_floats(
-            [2.0 / (a[3] - a[0]), 2.0 / (a[4] - a[1]), 2.0 / (a[5] - a[2])],
+            [
+                2.0 / (a[3] - a[0]),
+                2.0 / (a[4] - a[1]),
+                2.0 / (a[5] - a[2]),
+            ],
             &device,
         )
         .reshape([1, 3]);
@@ -208,11 +222,16 @@ impl NerfModel {
             if s == 1 {
                 t
             } else {
-                t.unsqueeze_dim::<3>(0).expand([s, n, w]).reshape([s * n, w])
+                t.unsqueeze_dim::<3>(0)
+                    .expand([s, n, w])
+                    .reshape([s * n, w])
             }
         };
         let pos = FourierEncoding::new(st.position_freqs).encode(self.unit_positions(x));
-        let code_rows = codes.reshape([s, 1, k]).expand([s, n, k]).reshape([s * n, k]);
+        let code_rows = codes
+            .reshape([s, 1, k])
+            .expand([s, n, k])
+            .reshape([s * n, k]);
         let style = st.sim.forward(code_rows, Some(repeat2(pos)));
         let raw_rep: Tensor<1> = repeat2(raw.reshape([n, 1])).reshape([s * n]);
         let (raw_s, feat_s) = st.am.forward(raw_rep, repeat2(features), style);

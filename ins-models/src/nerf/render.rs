@@ -3,11 +3,11 @@
 
 use burn::prelude::*;
 use ins_core::data::{Scene, SceneFormat};
+use ins_core::render::geometry::Vec3;
 use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::render::rays::{RayBatch, Rays, flatten};
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite};
-use ins_core::render::geometry::Vec3;
 
 use super::model::NerfModel;
 
@@ -25,7 +25,11 @@ impl RenderRays {
     /// The rays of `rays` as scene `scene` renders them: LLFF scenes in NDC (NeRF's
     /// forward-facing parametrisation, near plane 1), the others as they are.
     pub fn for_scene(scene: &Scene, rays: Rays) -> Self {
-        let view_dirs = rays.directions.iter().map(|d| d.normalize_or_zero()).collect();
+        let view_dirs = rays
+            .directions
+            .iter()
+            .map(|d| d.normalize_or_zero())
+            .collect();
         let rays = match scene.format {
             SceneFormat::Llff => match scene.views.first() {
                 Some(v) => rays.to_ndc(v.camera.width, v.camera.height, v.camera.fx, 1.0),
@@ -120,7 +124,9 @@ fn repeat_rows(t: Tensor<2>, s: usize) -> Tensor<2> {
         return t;
     }
     let [r, c] = t.dims();
-    t.unsqueeze_dim::<3>(0).expand([s, r, c]).reshape([s * r, c])
+    t.unsqueeze_dim::<3>(0)
+        .expand([s, r, c])
+        .reshape([s * r, c])
 }
 
 /// Renders `rays` with `model`, under the style codes `codes [S, n_styles]` if given. `seed`
@@ -135,9 +141,16 @@ pub fn render(
     device: &Device,
 ) -> Rendered {
     match sampling {
-        Sampling::Occupancy { grid, max_per_ray } => {
-            render_marched(model, rays, grid, max_per_ray, codes, background, seed, device)
-        }
+        Sampling::Occupancy { grid, max_per_ray } => render_marched(
+            model,
+            rays,
+            grid,
+            max_per_ray,
+            codes,
+            background,
+            seed,
+            device,
+        ),
         Sampling::CoarseFine { coarse, fine } => {
             render_coarse_fine(model, rays, coarse, fine, codes, background, seed, device)
         }
@@ -184,13 +197,21 @@ fn render_marched(
             delta_pad[ray * width + j] = m.delta[k];
         }
         // Padding keeps the last distance so the depth of empty columns stays meaningful.
-        let last = if b > a { m.t[b - 1] } else { rays.rays.near[ray] };
+        let last = if b > a {
+            m.t[b - 1]
+        } else {
+            rays.rays.near[ray]
+        };
         for j in (b - a)..width {
             t_pad[ray * width + j] = last;
         }
     }
     let points = tensor2(x, n, 3, device);
-    let ev = model.evaluate(points.clone(), model.field.color.encode_dirs(&dirs, device), codes);
+    let ev = model.evaluate(
+        points.clone(),
+        model.field.color.encode_dirs(&dirs, device),
+        codes,
+    );
     let s = ev.density.dims()[0];
     let index = Tensor::<1, Int>::from_data(TensorData::new(index, [r * width]), device);
     let density = Tensor::cat(vec![ev.density, Tensor::zeros([s, 1], device)], 1)
@@ -229,14 +250,17 @@ fn render_coarse_fine(
     let far = Tensor::<1>::from_floats(rays.rays.far.as_slice(), device);
     let points = |t: &Tensor<2>| -> Tensor<2> {
         let s = t.dims()[1];
-        (o.clone().unsqueeze_dim::<3>(1) + d.clone().unsqueeze_dim::<3>(1) * t.clone().unsqueeze_dim::<3>(2))
-            .reshape([r * s, 3])
+        (o.clone().unsqueeze_dim::<3>(1)
+            + d.clone().unsqueeze_dim::<3>(1) * t.clone().unsqueeze_dim::<3>(2))
+        .reshape([r * s, 3])
     };
     // Encoded directions, repeated for each of a ray's `s` samples.
     let view = |head: &ins_core::modules::color_head::ColorHead, s: usize| -> Tensor<2> {
         let enc = head.encode_dirs(&view_flat, device);
         let d = enc.dims()[1];
-        enc.unsqueeze_dim::<3>(1).expand([r, s, d]).reshape([r * s, d])
+        enc.unsqueeze_dim::<3>(1)
+            .expand([r, s, d])
+            .reshape([r * s, d])
     };
     let t_c = stratified(near, far.clone(), n_coarse, seed);
     let coarse = model.coarse.as_ref().unwrap_or(&model.field);
@@ -248,7 +272,12 @@ fn render_coarse_fine(
         deltas(t_c.clone(), far.clone()),
         background,
     );
-    let t_f = hierarchical(t_c, c.weights.clone(), n_fine, seed.map(|s| s ^ 0x5bd1_e995));
+    let t_f = hierarchical(
+        t_c,
+        c.weights.clone(),
+        n_fine,
+        seed.map(|s| s ^ 0x5bd1_e995),
+    );
     let total = n_coarse + n_fine;
     let x = points(&t_f);
     let ev = model.evaluate(x.clone(), view(&model.field.color, total), codes);

@@ -68,8 +68,16 @@ fn spread(views: &[usize], n: usize) -> Vec<usize> {
 
 /// A fresh occupancy grid over a model's box.
 pub fn fresh_grid(aabb: [f32; 6], resolution: u32) -> OccupancyGrid {
-    let (min, max) = (Vec3::new(aabb[0], aabb[1], aabb[2]), Vec3::new(aabb[3], aabb[4], aabb[5]));
-    OccupancyGrid::new(resolution, min, max, OccupancyGrid::default_step(resolution, min, max))
+    let (min, max) = (
+        Vec3::new(aabb[0], aabb[1], aabb[2]),
+        Vec3::new(aabb[3], aabb[4], aabb[5]),
+    );
+    OccupancyGrid::new(
+        resolution,
+        min,
+        max,
+        OccupancyGrid::default_step(resolution, min, max),
+    )
 }
 
 /// The sampler a run uses.
@@ -102,24 +110,6 @@ pub fn render_sampling<'a>(cfg: &NerfRunConfig, grid: Option<&'a OccupancyGrid>)
     }
 }
 
-/// Writes `config.json`, or checks that a resumed run uses the same configuration.
-fn write_config(cfg: &NerfRunConfig, out: &Path, resume: bool) -> Result<()> {
-    let path = out.join("config.json");
-    if resume && path.exists() {
-        let saved = NerfRunConfig::from_file(&path)?;
-        if saved != *cfg {
-            bail!(
-                "{}: the run was started with another configuration; resume with the same options (or --config {})",
-                path.display(),
-                path.display()
-            );
-        }
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    ins_io::write_atomic(&path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
-    Ok(())
-}
-
 fn options_eval(cfg: &NerfRunConfig, scene: &Scene, out: &Path) -> EvalSchedule {
     EvalSchedule {
         every: cfg.eval_every,
@@ -129,7 +119,11 @@ fn options_eval(cfg: &NerfRunConfig, scene: &Scene, out: &Path) -> EvalSchedule 
 }
 
 /// Pretrains a NeRF on `cfg.scene` into `opts.out_dir`.
-pub fn pretrain(cfg: &NerfRunConfig, device: &Device, opts: TrainOptions) -> Result<TrainOutcome<NerfModel>> {
+pub fn pretrain(
+    cfg: &NerfRunConfig,
+    device: &Device,
+    opts: TrainOptions,
+) -> Result<TrainOutcome<NerfModel>> {
     let scene_path = cfg.scene.clone().context("pretraining needs --scene DIR")?;
     let (scene, factor) = load_scene(&scene_path, cfg.downscale)?;
     let mut cfg = cfg.clone();
@@ -137,10 +131,11 @@ pub fn pretrain(cfg: &NerfRunConfig, device: &Device, opts: TrainOptions) -> Res
     cfg.steps = cfg.steps_for(RunKind::Pretrain);
     cfg.lr = cfg.lr_for(RunKind::Pretrain);
     let out = opts.out_dir.clone();
-    write_config(&cfg, &out, opts.resume)?;
+    crate::config::write_run_config(&cfg, &out, opts.resume)?;
     let ad = device.clone().autodiff();
     let aabb = scene_aabb(&scene);
-    let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || NerfModel::new(&cfg.arch(), aabb, &ad));
+    let model =
+        ins_core::train::seeding::seeded(&ad, cfg.seed, || NerfModel::new(&cfg.arch(), aabb, &ad));
     let grid = (cfg.cim == CimKind::Grid).then(|| fresh_grid(aabb, cfg.occupancy_resolution));
     let eval = options_eval(&cfg, &scene, &out);
     let mut task = NerfTask::new(scene, sampler(&cfg, true), grid, None, eval, &ad);
@@ -162,13 +157,22 @@ pub fn pretrain(cfg: &NerfRunConfig, device: &Device, opts: TrainOptions) -> Res
 }
 
 /// Renders every held-out view at the end of a run: `val/final.png` and the mean scores.
-fn final_report(model: &NerfModel, task: &NerfTask, cfg: &NerfRunConfig, out: &Path, device: &Device) -> Result<()> {
+fn final_report(
+    model: &NerfModel,
+    task: &NerfTask,
+    cfg: &NerfRunConfig,
+    out: &Path,
+    device: &Device,
+) -> Result<()> {
     let views = heldout_views(&task.scene);
     if views.is_empty() {
         return Ok(());
     }
     let shown = spread(&views, 8);
-    let code = task.style.as_ref().map(|s| s.codes.clone().slice([0..1]).inner().to_device(device));
+    let code = task
+        .style
+        .as_ref()
+        .map(|s| s.codes.clone().slice([0..1]).inner().to_device(device));
     let evals = evaluate_views(
         &model.valid().to_device(device),
         &task.scene,
@@ -204,7 +208,10 @@ impl NerfRun {
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let config_path = dir.join("config.json");
         if !config_path.is_file() {
-            bail!("{} is not a NeRF run folder (no config.json)", dir.display());
+            bail!(
+                "{} is not a NeRF run folder (no config.json)",
+                dir.display()
+            );
         }
         let config = NerfRunConfig::from_file(&config_path)
             .with_context(|| format!("{} is not a NeRF run", dir.display()))?;
@@ -217,7 +224,10 @@ impl NerfRun {
                 (base.clone(), Some(base))
             }
         };
-        let scene_path = scene_cfg.scene.clone().context("the base run has no scene")?;
+        let scene_path = scene_cfg
+            .scene
+            .clone()
+            .context("the base run has no scene")?;
         let (scene, _) = load_scene(&scene_path, scene_cfg.downscale)?;
         let store = CheckpointStore::new(dir.join("checkpoints"), 2);
         let latest = store
@@ -235,9 +245,11 @@ impl NerfRun {
         }
         let model = load_module_bytes(model, ckpt.model, &latest.join("model.bpk"))?;
         let grid = match ckpt.task {
-            Some(bytes) => super::state_io::decode(&bytes)
-                .with_context(|| format!("{}", latest.join("task.bin").display()))?
-                .1,
+            Some(bytes) => {
+                super::state_io::decode(&bytes)
+                    .with_context(|| format!("{}", latest.join("task.bin").display()))?
+                    .1
+            }
             None => None,
         };
         Ok(Self {
@@ -262,7 +274,11 @@ impl NerfRun {
 
     /// Background colour of the scene.
     pub fn background(&self) -> [f32; 3] {
-        if self.scene.white_background { [1.0; 3] } else { [0.0; 3] }
+        if self.scene.white_background {
+            [1.0; 3]
+        } else {
+            [0.0; 3]
+        }
     }
 
     /// A style code `[1, n]` from mix weights (normalised), or `None` for an unstylized run.
@@ -281,7 +297,12 @@ fn patch_stride(cfg: &NerfRunConfig, scene: &Scene) -> u32 {
 }
 
 /// Stylizes the pretrained run `cfg.from` with `cfg.styles` into `opts.out_dir`.
-pub fn stylize(cfg: &NerfRunConfig, vgg: Vgg, device: &Device, opts: TrainOptions) -> Result<TrainOutcome<NerfModel>> {
+pub fn stylize(
+    cfg: &NerfRunConfig,
+    vgg: Vgg,
+    device: &Device,
+    opts: TrainOptions,
+) -> Result<TrainOutcome<NerfModel>> {
     cfg.kind()?;
     let from = cfg.from.clone().context("stylizing needs --from RUN")?;
     let base = NerfRun::load(&from, device)?;
@@ -289,7 +310,10 @@ pub fn stylize(cfg: &NerfRunConfig, vgg: Vgg, device: &Device, opts: TrainOption
         bail!(
             "{} is already a stylized run; stylize its pretrained run ({}) instead",
             from.display(),
-            base.config.from.as_ref().map_or("?".into(), |p| p.display().to_string())
+            base.config
+                .from
+                .as_ref()
+                .map_or("?".into(), |p| p.display().to_string())
         );
     }
     if cfg.cim != base.config.cim {
@@ -314,16 +338,18 @@ pub fn stylize(cfg: &NerfRunConfig, vgg: Vgg, device: &Device, opts: TrainOption
     cfg.steps = cfg.steps_for(RunKind::Stylize);
     cfg.lr = cfg.lr_for(RunKind::Stylize);
     let out = opts.out_dir.clone();
-    write_config(&cfg, &out, opts.resume)?;
+    crate::config::write_run_config(&cfg, &out, opts.resume)?;
 
     let ad = device.clone().autodiff();
     let teacher = base.model.field.geometry.clone().to_device(&ad).no_grad();
     let n = styles.len();
     let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || {
-        base.model
-            .clone()
-            .to_device(&ad)
-            .with_stylizer(n, cfg.sim_width_for(), cfg.position_freqs, &ad)
+        base.model.clone().to_device(&ad).with_stylizer(
+            n,
+            cfg.sim_width_for(),
+            cfg.position_freqs,
+            &ad,
+        )
     });
     let vgg = vgg.to_device(&ad);
     let targets: Vec<StyleTarget> = styles
@@ -347,7 +373,14 @@ pub fn stylize(cfg: &NerfRunConfig, vgg: Vgg, device: &Device, opts: TrainOption
         patch,
     };
     let eval = options_eval(&cfg, &base.scene, &out);
-    let mut task = NerfTask::new(base.scene, sampler(&cfg, false), base.grid, Some(style), eval, &ad);
+    let mut task = NerfTask::new(
+        base.scene,
+        sampler(&cfg, false),
+        base.grid,
+        Some(style),
+        eval,
+        &ad,
+    );
     let mut phase = Phase::new("stylize", NerfObjective::Stylize, cfg.steps, cfg.lr)
         .weight("style", weights.style)
         .weight("content", weights.content)

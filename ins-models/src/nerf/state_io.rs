@@ -19,7 +19,12 @@ pub fn encode(samples_per_ray: f32, grid: Option<&OccupancyGrid>) -> Vec<u8> {
         Some(g) => {
             out.push(1);
             out.extend_from_slice(&g.resolution.to_le_bytes());
-            for v in g.min.iter().chain(&g.max).chain([&g.step, &g.threshold, &g.decay]) {
+            for v in g
+                .min
+                .iter()
+                .chain(&g.max)
+                .chain([&g.step, &g.threshold, &g.decay])
+            {
                 out.extend_from_slice(&v.to_le_bytes());
             }
             for d in &g.density {

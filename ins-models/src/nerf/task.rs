@@ -138,9 +138,14 @@ impl NerfTask {
     /// The sampling for this step's render.
     fn sampling(&self) -> Sampling<'_> {
         match (self.sampler, &self.grid) {
-            (Sampler::Marching { max_per_ray, .. }, Some(grid)) => Sampling::Occupancy { grid, max_per_ray },
+            (Sampler::Marching { max_per_ray, .. }, Some(grid)) => {
+                Sampling::Occupancy { grid, max_per_ray }
+            }
             (Sampler::CoarseFine { coarse, fine, .. }, _) => Sampling::CoarseFine { coarse, fine },
-            (Sampler::Marching { .. }, None) => Sampling::CoarseFine { coarse: 64, fine: 64 },
+            (Sampler::Marching { .. }, None) => Sampling::CoarseFine {
+                coarse: 64,
+                fine: 64,
+            },
         }
     }
 
@@ -148,7 +153,8 @@ impl NerfTask {
     fn ray_count(&self) -> usize {
         match self.sampler {
             Sampler::Marching { target_samples, .. } => {
-                ((target_samples as f32 / self.samples_per_ray.max(1.0)) as usize).clamp(256, 1 << 16)
+                ((target_samples as f32 / self.samples_per_ray.max(1.0)) as usize)
+                    .clamp(256, 1 << 16)
             }
             Sampler::CoarseFine { rays, .. } => rays,
         }
@@ -158,7 +164,8 @@ impl NerfTask {
         let batch = RaySampler::new(self.ray_count(), seed).sample(&self.scene, Split::Train)?;
         let rays = RenderRays::from_batch(&self.scene, &batch);
         let r = batch.len();
-        let target = Tensor::<1>::from_floats(batch.rgb.as_flattened(), &self.device).reshape([r, 3]);
+        let target =
+            Tensor::<1>::from_floats(batch.rgb.as_flattened(), &self.device).reshape([r, 3]);
         // Photos composited on white with an alpha mask (NeRF-synthetic) train against random
         // backgrounds, recomposited from the alpha: a field cannot then explain the white
         // background with colour instead of transparency (instant-ngp's trick).
@@ -169,14 +176,37 @@ impl NerfTask {
             let mut rng = SmallRng::seed_from_u64(seed ^ 0xba5e_ba11);
             let bg: Vec<f32> = (0..r * 3).map(|_| rng.random::<f32>()).collect();
             let bg = Tensor::<1>::from_floats(bg.as_slice(), &self.device).reshape([r, 3]);
-            let alpha = Tensor::<1>::from_floats(batch.mask.as_slice(), &self.device).reshape([r, 1]);
+            let alpha =
+                Tensor::<1>::from_floats(batch.mask.as_slice(), &self.device).reshape([r, 1]);
             let transparent = alpha.neg().add_scalar(1.0);
             let target = target + transparent * (bg.clone().sub_scalar(1.0));
-            let out = render(model, &rays, self.sampling(), None, [0.0; 3], Some(seed), &self.device);
-            let rest = out.fine.opacity.clone().neg().add_scalar(1.0).reshape([r, 1]);
+            let out = render(
+                model,
+                &rays,
+                self.sampling(),
+                None,
+                [0.0; 3],
+                Some(seed),
+                &self.device,
+            );
+            let rest = out
+                .fine
+                .opacity
+                .clone()
+                .neg()
+                .add_scalar(1.0)
+                .reshape([r, 1]);
             (out.fine.rgb.clone() + rest * bg, target, out)
         } else {
-            let out = render(model, &rays, self.sampling(), None, self.background, Some(seed), &self.device);
+            let out = render(
+                model,
+                &rays,
+                self.sampling(),
+                None,
+                self.background,
+                Some(seed),
+                &self.device,
+            );
             (out.fine.rgb.clone(), target, out)
         };
         self.last_samples = out.samples;
@@ -193,7 +223,10 @@ impl NerfTask {
     }
 
     fn stylize_losses(&mut self, model: &NerfModel, seed: u64) -> Result<LossTerms> {
-        let style = self.style.as_ref().context("a stylization phase without styles")?;
+        let style = self
+            .style
+            .as_ref()
+            .context("a stylization phase without styles")?;
         let spec = style.patch;
         let mut sampler = PatchSampler::new(spec.size, spec.stride, seed);
         let patch = sampler.sample(&self.scene, Split::Train)?;
@@ -211,7 +244,11 @@ impl NerfTask {
         self.last_samples = out.samples;
         self.last_rays = k * k;
         let n_styles = style.codes.dims()[0];
-        let images = out.fine.rgb.reshape([n_styles, k, k, 3]).permute([0, 3, 1, 2]);
+        let images = out
+            .fine
+            .rgb
+            .reshape([n_styles, k, k, 3])
+            .permute([0, 3, 1, 2]);
         let photo = Tensor::<1>::from_floats(patch.batch.rgb.as_flattened(), &self.device)
             .reshape([1, k, k, 3])
             .permute([0, 3, 1, 2]);
@@ -222,17 +259,24 @@ impl NerfTask {
             raw.detach()
         };
         let [s, n] = out.raw.dims();
-        let geometry = (out.raw - teacher_raw.reshape([1, n]).expand([s, n])).abs().mean();
+        let geometry = (out.raw - teacher_raw.reshape([1, n]).expand([s, n]))
+            .abs()
+            .mean();
         Ok(LossTerms::default()
             .term("style", style_loss(&feats, &style.targets))
             .term("content", content_loss(&feats, &content_target))
             .term("geometry", geometry)
-            .metric("samples_per_ray", self.last_samples as f64 / self.last_rays.max(1) as f64))
+            .metric(
+                "samples_per_ray",
+                self.last_samples as f64 / self.last_rays.max(1) as f64,
+            ))
     }
 
     /// Refreshes the occupancy grid from the model's current density.
     pub fn refresh_grid(&mut self, model: &NerfModel, step: usize, seed: u64) {
-        let Some(grid) = self.grid.as_mut() else { return };
+        let Some(grid) = self.grid.as_mut() else {
+            return;
+        };
         let cells = if step < WARMUP_STEPS {
             usize::MAX
         } else {
@@ -275,8 +319,13 @@ impl NerfTask {
             &device,
         )?;
         let pictures: Vec<RgbImage> = views.iter().map(|v| v.picture(&self.scene)).collect();
-        save_eval_picture(&pictures, &self.eval.dir.join(format!("step_{step:06}.png")))?;
-        let mean = |f: fn(&super::eval::ViewEval) -> f64| views.iter().map(f).sum::<f64>() / views.len().max(1) as f64;
+        save_eval_picture(
+            &pictures,
+            &self.eval.dir.join(format!("step_{step:06}.png")),
+        )?;
+        let mean = |f: fn(&super::eval::ViewEval) -> f64| {
+            views.iter().map(f).sum::<f64>() / views.len().max(1) as f64
+        };
         if n_styles > 0 {
             return Ok(Vec::new());
         }
@@ -299,14 +348,22 @@ impl Task for NerfTask {
         }
     }
 
-    fn losses(&mut self, model: &NerfModel, step: &StepContext<NerfObjective>) -> Result<LossTerms> {
+    fn losses(
+        &mut self,
+        model: &NerfModel,
+        step: &StepContext<NerfObjective>,
+    ) -> Result<LossTerms> {
         match step.phase.objective {
             NerfObjective::Pretrain => self.pretrain_losses(model, step.seed),
             NerfObjective::Stylize => self.stylize_losses(model, step.seed),
         }
     }
 
-    fn after_step(&mut self, model: &NerfModel, step: &StepContext<NerfObjective>) -> Result<Vec<(String, f64)>> {
+    fn after_step(
+        &mut self,
+        model: &NerfModel,
+        step: &StepContext<NerfObjective>,
+    ) -> Result<Vec<(String, f64)>> {
         if self.last_rays > 0 {
             let per_ray = self.last_samples as f32 / self.last_rays as f32;
             self.samples_per_ray = 0.9 * self.samples_per_ray + 0.1 * per_ray.max(1.0);
@@ -319,14 +376,20 @@ impl Task for NerfTask {
             self.refresh_grid(model, step.step_in_phase, step.seed ^ 0x0cc0_9a1d);
         }
         let done = step.step_in_phase + 1;
-        if self.eval.every > 0 && done.is_multiple_of(self.eval.every) && !self.eval.views.is_empty() {
+        if self.eval.every > 0
+            && done.is_multiple_of(self.eval.every)
+            && !self.eval.views.is_empty()
+        {
             return self.evaluate(model, step.global_step + 1);
         }
         Ok(Vec::new())
     }
 
     fn save_state(&self) -> Result<Option<Vec<u8>>> {
-        Ok(Some(super::state_io::encode(self.samples_per_ray, self.grid.as_ref())))
+        Ok(Some(super::state_io::encode(
+            self.samples_per_ray,
+            self.grid.as_ref(),
+        )))
     }
 
     fn load_state(&mut self, bytes: &[u8]) -> Result<()> {

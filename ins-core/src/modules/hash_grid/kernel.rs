@@ -49,7 +49,8 @@ impl GridShape {
         let l = self.levels.max(1);
         let t = 1usize << self.log2_table;
         let growth = if l > 1 {
-            ((self.max_resolution as f64).ln() - (self.base_resolution as f64).ln()) / (l - 1) as f64
+            ((self.max_resolution as f64).ln() - (self.base_resolution as f64).ln())
+                / (l - 1) as f64
         } else {
             0.0
         };
@@ -63,7 +64,8 @@ impl GridShape {
         let mut offset = 0;
         for level in 0..l {
             // The small epsilon keeps exact powers (16·2^l) from flooring one below.
-            let n = ((self.base_resolution as f64) * (growth * level as f64).exp() + 1e-9).floor() as u32;
+            let n = ((self.base_resolution as f64) * (growth * level as f64).exp() + 1e-9).floor()
+                as u32;
             let n = n.max(1);
             let vertices = (n as usize + 1).pow(3);
             let dense = vertices <= t;
@@ -86,7 +88,9 @@ impl GridShape {
 impl Layout {
     /// Total rows of the table.
     pub fn total_rows(&self) -> usize {
-        self.offset.last().map_or(0, |o| o + self.rows.last().copied().unwrap_or(0))
+        self.offset
+            .last()
+            .map_or(0, |o| o + self.rows.last().copied().unwrap_or(0))
     }
 
     /// Number of levels.
@@ -101,7 +105,9 @@ impl Layout {
             let n = self.resolution[l] as usize + 1;
             x as usize + y as usize * n + z as usize * n * n
         } else {
-            let h = (x as u64) ^ (y as u64).wrapping_mul(2_654_435_761) ^ (z as u64).wrapping_mul(805_459_861);
+            let h = (x as u64)
+                ^ (y as u64).wrapping_mul(2_654_435_761)
+                ^ (z as u64).wrapping_mul(805_459_861);
             (h as usize) & (self.rows[l] - 1)
         };
         self.offset[l] + local
@@ -136,8 +142,14 @@ impl Layout {
             // rows as the 64-bit hash of `row`.
             let mask = (self.rows[l] - 1) as u32;
             let hx = [i[0], i[0] + 1];
-            let hy = [i[1].wrapping_mul(2_654_435_761), (i[1] + 1).wrapping_mul(2_654_435_761)];
-            let hz = [i[2].wrapping_mul(805_459_861), (i[2] + 1).wrapping_mul(805_459_861)];
+            let hy = [
+                i[1].wrapping_mul(2_654_435_761),
+                (i[1] + 1).wrapping_mul(2_654_435_761),
+            ];
+            let hz = [
+                i[2].wrapping_mul(805_459_861),
+                (i[2] + 1).wrapping_mul(805_459_861),
+            ];
             for (c, r) in rows.iter_mut().enumerate() {
                 *r = off + ((hx[c & 1] ^ hy[(c >> 1) & 1] ^ hz[(c >> 2) & 1]) & mask) as usize;
             }
@@ -194,7 +206,9 @@ pub fn forward(layout: &Layout, table: &[f32], positions: &[f32], out: &mut [f32
     let mut scratch = vec![0f32; levels * n * nf];
     let share = n.div_ceil(rayon::current_num_threads().max(1)).max(CHUNK);
     // scratch[l][i] for the points of each share: split every level's block by share.
-    let mut blocks: Vec<Vec<&mut [f32]>> = (0..n.div_ceil(share)).map(|_| Vec::with_capacity(levels)).collect();
+    let mut blocks: Vec<Vec<&mut [f32]>> = (0..n.div_ceil(share))
+        .map(|_| Vec::with_capacity(levels))
+        .collect();
     for level_block in scratch.chunks_mut(n * nf) {
         for (s, part) in level_block.chunks_mut(share * nf).enumerate() {
             blocks[s].push(part);
@@ -230,16 +244,18 @@ pub fn forward(layout: &Layout, table: &[f32], positions: &[f32], out: &mut [f32
         });
     // Level-major scratch → point-major output.
     let width = levels * nf;
-    out.par_chunks_mut(width * CHUNK).enumerate().for_each(|(ci, o)| {
-        let first = ci * CHUNK;
-        for (k, row) in o.chunks_exact_mut(width).enumerate() {
-            let i = first + k;
-            for l in 0..levels {
-                let src = &scratch[(l * n + i) * nf..(l * n + i + 1) * nf];
-                row[l * nf..(l + 1) * nf].copy_from_slice(src);
+    out.par_chunks_mut(width * CHUNK)
+        .enumerate()
+        .for_each(|(ci, o)| {
+            let first = ci * CHUNK;
+            for (k, row) in o.chunks_exact_mut(width).enumerate() {
+                let i = first + k;
+                for l in 0..levels {
+                    let src = &scratch[(l * n + i) * nf..(l * n + i + 1) * nf];
+                    row[l * nf..(l + 1) * nf].copy_from_slice(src);
+                }
             }
-        }
-    });
+        });
 }
 
 /// Splits the table into per-level slices so levels can be accumulated in parallel.
@@ -260,16 +276,24 @@ fn level_slices<'a>(layout: &Layout, table: &'a mut [f32]) -> Vec<&'a mut [f32]>
 /// The upstream gradient is first transposed to level-major order (one pass); then the levels,
 /// which own disjoint rows, accumulate in parallel, each streaming its contiguous gradient
 /// block while its table stays in cache.
-pub fn backward_table(layout: &Layout, positions: &[f32], grad_out: &[f32], grad_table: &mut [f32]) {
+pub fn backward_table(
+    layout: &Layout,
+    positions: &[f32],
+    grad_out: &[f32],
+    grad_table: &mut [f32],
+) {
     let (levels, nf) = (layout.levels(), layout.features);
     let n = positions.len() / 3;
     let width = levels * nf;
     let mut by_level = vec![0f32; levels * n * nf];
-    by_level.par_chunks_mut(n * nf).enumerate().for_each(|(l, dst)| {
-        for (d, g) in dst.chunks_exact_mut(nf).zip(grad_out.chunks_exact(width)) {
-            d.copy_from_slice(&g[l * nf..(l + 1) * nf]);
-        }
-    });
+    by_level
+        .par_chunks_mut(n * nf)
+        .enumerate()
+        .for_each(|(l, dst)| {
+            for (d, g) in dst.chunks_exact_mut(nf).zip(grad_out.chunks_exact(width)) {
+                d.copy_from_slice(&g[l * nf..(l + 1) * nf]);
+            }
+        });
     level_slices(layout, grad_table)
         .into_par_iter()
         .zip(by_level.par_chunks(n * nf))
@@ -306,7 +330,11 @@ pub fn backward_positions(
         .zip(positions.par_chunks(3 * CHUNK))
         .zip(grad_out.par_chunks(width * CHUNK))
         .for_each(|((gp, pos), go)| {
-            for ((gp, p), go) in gp.chunks_exact_mut(3).zip(pos.chunks_exact(3)).zip(go.chunks_exact(width)) {
+            for ((gp, p), go) in gp
+                .chunks_exact_mut(3)
+                .zip(pos.chunks_exact(3))
+                .zip(go.chunks_exact(width))
+            {
                 let mut acc = [0f32; 3];
                 let p = [p[0], p[1], p[2]];
                 for l in 0..levels {
@@ -322,7 +350,11 @@ pub fn backward_positions(
                 }
                 // Clamped coordinates do not move the encoding.
                 for k in 0..3 {
-                    gp[k] = if (0.0..=1.0).contains(&p[k]) { acc[k] } else { 0.0 };
+                    gp[k] = if (0.0..=1.0).contains(&p[k]) {
+                        acc[k]
+                    } else {
+                        0.0
+                    };
                 }
             }
         });
@@ -376,14 +408,21 @@ pub fn jacobian_backward_table(
             let off = layout.offset[l];
             for (p, gj) in positions.chunks_exact(3).zip(grad_jac.chunks_exact(width)) {
                 let p = [p[0], p[1], p[2]];
-                let inside: [f32; 3] =
-                    std::array::from_fn(|k| if (0.0..=1.0).contains(&p[k]) { 1.0 } else { 0.0 });
+                let inside: [f32; 3] = std::array::from_fn(|k| {
+                    if (0.0..=1.0).contains(&p[k]) {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                });
                 let (rows, _, dw) = layout.corners(l, p);
                 for c in 0..8 {
                     let dst = &mut g[(rows[c] - off) * nf..(rows[c] - off + 1) * nf];
                     for (fi, d) in dst.iter_mut().enumerate() {
                         let e = (l * nf + fi) * 3;
-                        *d += (0..3).map(|k| dw[c][k] * inside[k] * gj[e + k]).sum::<f32>();
+                        *d += (0..3)
+                            .map(|k| dw[c][k] * inside[k] * gj[e + k])
+                            .sum::<f32>();
                     }
                 }
             }
@@ -457,7 +496,9 @@ mod tests {
 
     /// Points away from every level's cell boundaries (finite differences cross no kink).
     fn points() -> Vec<f32> {
-        vec![0.13, 0.71, 0.42, 0.9, 0.05, 0.33, 0.47, 0.53, 0.77, 0.011, 0.99, 0.6]
+        vec![
+            0.13, 0.71, 0.42, 0.9, 0.05, 0.33, 0.47, 0.53, 0.77, 0.011, 0.99, 0.6,
+        ]
     }
 
     #[test]
@@ -483,7 +524,11 @@ mod tests {
             let mut tm = t.clone();
             tm[i] -= eps;
             let fd = (loss(&tp, &p) - loss(&tm, &p)) / (2.0 * eps as f64);
-            assert!((fd as f32 - gt[i]).abs() < 1e-3, "table {i}: {fd} vs {}", gt[i]);
+            assert!(
+                (fd as f32 - gt[i]).abs() < 1e-3,
+                "table {i}: {fd} vs {}",
+                gt[i]
+            );
         }
         let mut gp = vec![0.0; p.len()];
         backward_positions(&layout, &t, &p, &g, &mut gp);
@@ -494,7 +539,11 @@ mod tests {
             let mut pm = p.clone();
             pm[i] -= eps;
             let fd = (loss(&t, &pp) - loss(&t, &pm)) / (2.0 * eps as f64);
-            assert!((fd as f32 - gp[i]).abs() < 2e-2 * (1.0 + fd.abs() as f32), "position {i}: {fd} vs {}", gp[i]);
+            assert!(
+                (fd as f32 - gp[i]).abs() < 2e-2 * (1.0 + fd.abs() as f32),
+                "position {i}: {fd} vs {}",
+                gp[i]
+            );
         }
     }
 
@@ -519,7 +568,10 @@ mod tests {
                 for e in 0..8 {
                     let fd = (a[i * 8 + e] - b[i * 8 + e]) / (2.0 * eps);
                     let j = jac[(i * 8 + e) * 3 + k];
-                    assert!((fd - j).abs() < 2e-2 * (1.0 + j.abs()), "point {i} axis {k}: {fd} vs {j}");
+                    assert!(
+                        (fd - j).abs() < 2e-2 * (1.0 + j.abs()),
+                        "point {i} axis {k}: {fd} vs {j}"
+                    );
                 }
             }
         }
@@ -527,11 +579,16 @@ mod tests {
         let gj: Vec<f32> = (0..jac.len()).map(|i| ((i * 3) % 7) as f32 - 3.0).collect();
         let mut gt = vec![0.0; t.len()];
         jacobian_backward_table(&layout, &p, &gj, &mut gt);
-        let dt: Vec<f32> = (0..t.len()).map(|i| ((i * 5) % 11) as f32 / 11.0 - 0.5).collect();
+        let dt: Vec<f32> = (0..t.len())
+            .map(|i| ((i * 5) % 11) as f32 / 11.0 - 0.5)
+            .collect();
         let mut jd = vec![0.0; jac.len()];
         jacobian(&layout, &dt, &p, &mut jd);
         let lhs: f64 = jd.iter().zip(&gj).map(|(a, b)| (a * b) as f64).sum();
         let rhs: f64 = gt.iter().zip(&dt).map(|(a, b)| (a * b) as f64).sum();
-        assert!((lhs - rhs).abs() < 1e-3 * (1.0 + lhs.abs()), "{lhs} vs {rhs}");
+        assert!(
+            (lhs - rhs).abs() < 1e-3 * (1.0 + lhs.abs()),
+            "{lhs} vs {rhs}"
+        );
     }
 }

@@ -53,9 +53,15 @@ impl HashGridConfig {
             return Err("hash grid: levels and features must be positive".into());
         }
         if !(4..=19).contains(&self.log2_table) {
-            return Err(format!("hash grid: log2_table {} is outside 4..=19", self.log2_table));
+            return Err(format!(
+                "hash grid: log2_table {} is outside 4..=19",
+                self.log2_table
+            ));
         }
-        if self.base_resolution == 0 || self.max_resolution < self.base_resolution || self.max_resolution > 2047 {
+        if self.base_resolution == 0
+            || self.max_resolution < self.base_resolution
+            || self.max_resolution > 2047
+        {
             return Err(format!(
                 "hash grid: resolutions {}..{} must satisfy 1 ≤ base ≤ max ≤ 2047",
                 self.base_resolution, self.max_resolution

@@ -16,8 +16,8 @@ use burn::backend::flex::FlexTensor;
 use burn::backend::ops::FloatTensorOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
-    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, NdArray,
-    TensorData, TensorMetadata, backend_extension, read_sync,
+    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, NdArray, TensorData,
+    TensorMetadata, backend_extension, read_sync,
 };
 use burn::prelude::*;
 
@@ -89,11 +89,17 @@ impl HashGridOps for Flex {
         flex_from(out, [n, shape.d_out()])
     }
 
-    fn hash_grid_backward_table(positions: FlexTensor, grad_out: FlexTensor, shape: GridShape) -> FlexTensor {
+    fn hash_grid_backward_table(
+        positions: FlexTensor,
+        grad_out: FlexTensor,
+        shape: GridShape,
+    ) -> FlexTensor {
         let layout = shape.layout();
         let mut g = vec![0.0; layout.total_rows() * layout.features];
         flex_values(&positions, |p| {
-            flex_values(&grad_out, |go| kernel::backward_table(&layout, p, go, &mut g))
+            flex_values(&grad_out, |go| {
+                kernel::backward_table(&layout, p, go, &mut g)
+            })
         });
         flex_from(g, [layout.total_rows(), layout.features])
     }
@@ -109,13 +115,19 @@ impl HashGridOps for Flex {
         let mut g = vec![0.0; n * 3];
         flex_values(&positions, |p| {
             flex_values(&table, |t| {
-                flex_values(&grad_out, |go| kernel::backward_positions(&layout, t, p, go, &mut g))
+                flex_values(&grad_out, |go| {
+                    kernel::backward_positions(&layout, t, p, go, &mut g)
+                })
             })
         });
         flex_from(g, [n, 3])
     }
 
-    fn hash_grid_jacobian(positions: FlexTensor, table: FlexTensor, shape: GridShape) -> FlexTensor {
+    fn hash_grid_jacobian(
+        positions: FlexTensor,
+        table: FlexTensor,
+        shape: GridShape,
+    ) -> FlexTensor {
         let layout = shape.layout();
         let n = rows(&positions);
         let mut j = vec![0.0; n * shape.d_out() * 3];
@@ -133,7 +145,9 @@ impl HashGridOps for Flex {
         let layout = shape.layout();
         let mut g = vec![0.0; layout.total_rows() * layout.features];
         flex_values(&positions, |p| {
-            flex_values(&grad_jac, |gj| kernel::jacobian_backward_table(&layout, p, gj, &mut g))
+            flex_values(&grad_jac, |gj| {
+                kernel::jacobian_backward_table(&layout, p, gj, &mut g)
+            })
         });
         flex_from(g, [layout.total_rows(), layout.features])
     }
@@ -214,7 +228,12 @@ impl HashGridOps for NdArray {
     ) -> FloatTensor<Self> {
         let layout = shape.layout();
         let mut g = vec![0.0; layout.total_rows() * layout.features];
-        kernel::jacobian_backward_table(&layout, &nd_values(positions), &nd_values(grad_jac), &mut g);
+        kernel::jacobian_backward_table(
+            &layout,
+            &nd_values(positions),
+            &nd_values(grad_jac),
+            &mut g,
+        );
         nd_from(g, [layout.total_rows(), layout.features])
     }
 }

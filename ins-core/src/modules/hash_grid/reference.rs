@@ -24,27 +24,40 @@ fn level_corners(
     let frac = x - cell.clone();
     let cell = cell.int();
     let [count, _] = positions.dims();
-    let axis = |t: &Tensor<2, Int>, k: usize| t.clone().slice([0..count, k..k + 1]).reshape([count]);
+    let axis =
+        |t: &Tensor<2, Int>, k: usize| t.clone().slice([0..count, k..k + 1]).reshape([count]);
     let fax = |k: usize| frac.clone().slice([0..count, k..k + 1]).reshape([count]);
     let mask = (layout.rows[l] - 1) as i64;
     let verts = (n + 1) as i64;
     (0..8)
         .map(|c| {
             let b = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
-            let coords: Vec<Tensor<1, Int>> =
-                (0..3).map(|k| axis(&cell, k).add_scalar(b[k] as i64)).collect();
+            let coords: Vec<Tensor<1, Int>> = (0..3)
+                .map(|k| axis(&cell, k).add_scalar(b[k] as i64))
+                .collect();
             let local = if layout.dense[l] {
                 coords[0].clone()
                     + coords[1].clone().mul_scalar(verts)
                     + coords[2].clone().mul_scalar(verts * verts)
             } else {
                 // (v·P) mod 2^k only needs P mod 2^k, which keeps every product below 2^31.
-                let term = |k: usize| coords[k].clone().mul_scalar((PRIMES[k] as i64) & mask).bitwise_and_scalar(mask);
+                let term = |k: usize| {
+                    coords[k]
+                        .clone()
+                        .mul_scalar((PRIMES[k] as i64) & mask)
+                        .bitwise_and_scalar(mask)
+                };
                 term(0).bitwise_xor(term(1)).bitwise_xor(term(2))
             };
             let rows = local.add_scalar(layout.offset[l] as i64);
             let t: Vec<Tensor<1>> = (0..3)
-                .map(|k| if b[k] == 1 { fax(k) } else { fax(k).neg().add_scalar(1.0) })
+                .map(|k| {
+                    if b[k] == 1 {
+                        fax(k)
+                    } else {
+                        fax(k).neg().add_scalar(1.0)
+                    }
+                })
                 .collect();
             let s = |k: usize| if b[k] == 1 { nf } else { -nf };
             let w = t[0].clone() * t[1].clone() * t[2].clone();
