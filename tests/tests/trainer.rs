@@ -36,10 +36,12 @@ enum Fit {
     Regress,
 }
 
-/// Regression of y = x0 − x1; turns the loss into NaN from `nan_from` on.
+/// Regression of y = x0 − x1; turns the loss into NaN from `nan_from` on, and into a constant
+/// no parameter reaches at the steps listed in `untracked`.
 struct ToyTask {
     nan_from: usize,
     global: usize,
+    untracked: Vec<usize>,
 }
 
 impl Task for ToyTask {
@@ -57,6 +59,9 @@ impl Task for ToyTask {
         if self.global >= self.nan_from {
             loss = loss.mul_scalar(f32::NAN);
         }
+        if self.untracked.contains(&self.global) {
+            loss = Tensor::<1>::from_floats([0.5], &device);
+        }
         self.global += 1;
         Ok(LossTerms::default().term("mse", loss))
     }
@@ -66,6 +71,7 @@ fn task() -> ToyTask {
     ToyTask {
         nan_from: usize::MAX,
         global: 0,
+        untracked: Vec::new(),
     }
 }
 
@@ -99,6 +105,7 @@ fn nan_stops_with_a_typed_error_and_keeps_the_last_good_checkpoint() {
     let mut nan = ToyTask {
         nan_from: 5,
         global: 0,
+        untracked: Vec::new(),
     };
     let err = t
         .run(&mut nan, toy(&device))
@@ -219,4 +226,30 @@ fn a_second_run_into_the_same_folder_is_refused_and_resume_needs_a_checkpoint() 
         .err()
         .unwrap();
     assert!(matches!(e, TrainError::NothingToResume { .. }), "{e}");
+}
+
+#[test]
+fn a_loss_no_parameter_reaches_skips_the_update() {
+    let device = Device::flex().autodiff();
+    let dir = tempfile::tempdir().unwrap();
+    let t = Trainer::new(vec![fit(4, 1e-2)], quiet(dir.path()));
+    // Every step untracked: the run ends normally and nothing moved.
+    let mut idle = ToyTask {
+        untracked: (0..4).collect(),
+        ..task()
+    };
+    let start = toy(&device);
+    let before = values(start.a.weight.val());
+    let out = t.run(&mut idle, start).unwrap();
+    assert!(out.finished);
+    assert_eq!(values(out.model.a.weight.val()), before);
+    // One untracked step among tracked ones: the others still train.
+    let dir = tempfile::tempdir().unwrap();
+    let t = Trainer::new(vec![fit(4, 1e-2)], quiet(dir.path()));
+    let mut one = ToyTask {
+        untracked: vec![1],
+        ..task()
+    };
+    let out = t.run(&mut one, toy(&device)).unwrap();
+    assert_ne!(values(out.model.a.weight.val()), before);
 }

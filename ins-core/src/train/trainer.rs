@@ -190,8 +190,12 @@ impl<O: Objective> Trainer<O> {
                 self.save(&store, &model, &optim, &state, task_state)?;
                 self.write_plot(&state, task);
             }
-            let grads = GradientsParams::from_grads(values.total.backward(), &model);
-            model = optim.step(groups.learning_rates(lr, &phase.groups), model, grads);
+            // A loss no parameter reaches (an IDR patch whose rays all missed the surface) has
+            // nothing to teach: the step is logged and the parameters and Adam stay as they are.
+            if values.total.is_tracked() {
+                let grads = GradientsParams::from_grads(values.total.backward(), &model);
+                model = optim.step(groups.learning_rates(lr, &phase.groups), model, grads);
+            }
             let extra = task.after_step(&model, &ctx)?;
             step += 1;
 
