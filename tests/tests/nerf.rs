@@ -127,7 +127,7 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
         scene: None,
         from: Some(run_dir.clone()),
         styles: vec![style],
-        steps: 60,
+        steps: 150,
         patch: 24,
         stride: 2,
         style_size: 64,
@@ -190,6 +190,7 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     assert!(d1 < 0.5 * d0, "style distance {d0} → {d1}");
     // ...and the geometry did not.
     let err = median_depth_error(&after, &before);
+    eprintln!("median relative depth error after stylizing {err}");
     assert!(err < 0.02, "median relative depth error {err}");
 }
 
