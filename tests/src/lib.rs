@@ -97,3 +97,45 @@ pub fn small_config(
         ..Default::default()
     }
 }
+
+/// The part of `img` inside the bounding box of the pixels where `keep` is true (an object's
+/// box, so a plain background does not dominate statistics such as Gram matrices).
+pub fn crop_to_box(
+    img: &ins_core::imaging::RgbImage,
+    keep: &[bool],
+) -> ins_core::imaging::RgbImage {
+    let w = img.width;
+    let (mut x0, mut y0, mut x1, mut y1) = (w, img.height, 0, 0);
+    for (i, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
+        let (x, y) = (i % w, i / w);
+        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+    }
+    let mut data = Vec::new();
+    for y in y0..y1 {
+        data.extend_from_slice(&img.data[(y * w + x0) * 3..(y * w + x1) * 3]);
+    }
+    ins_core::imaging::RgbImage {
+        width: x1.saturating_sub(x0),
+        height: y1.saturating_sub(y0),
+        data,
+    }
+}
+
+/// PSNR of the best constant colour (the mean) over the selected pixels of `photos` (RGB f32
+/// triples, each with its selection): what a model that learned nothing but the mean scores.
+pub fn constant_colour_psnr(photos: &[(&[f32], Vec<bool>)]) -> f64 {
+    let selected = || {
+        photos.iter().flat_map(|(p, sel)| {
+            p.chunks(3)
+                .zip(sel.iter())
+                .filter(|(_, s)| **s)
+                .map(|(c, _)| c)
+        })
+    };
+    let n = selected().count() as f64;
+    let mean: [f64; 3] = std::array::from_fn(|c| selected().map(|p| p[c] as f64).sum::<f64>() / n);
+    let se: f64 = selected()
+        .map(|p| (0..3).map(|c| (p[c] as f64 - mean[c]).powi(2)).sum::<f64>())
+        .sum();
+    ins_core::loss::psnr(se / (3.0 * n))
+}

@@ -74,25 +74,11 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     let psnr = evals.iter().map(|e| e.psnr_mask).sum::<f64>() / evals.len() as f64;
     // The reference: the best constant colour inside the masks of the same views (what a colour
     // network that learned nothing but the mean would score).
-    let (mut sum, mut n) = ([0f64; 3], 0usize);
-    for e in &evals {
-        for (i, _) in e.mask.iter().enumerate().filter(|(_, m)| **m) {
-            for c in 0..3 {
-                sum[c] += e.photo[i * 3 + c] as f64;
-            }
-            n += 1;
-        }
-    }
-    let mean = sum.map(|v| v / n as f64);
-    let mut se = 0f64;
-    for e in &evals {
-        for (i, _) in e.mask.iter().enumerate().filter(|(_, m)| **m) {
-            se += (0..3)
-                .map(|c| (e.photo[i * 3 + c] as f64 - mean[c]).powi(2))
-                .sum::<f64>();
-        }
-    }
-    let psnr_constant = ins_core::loss::psnr(se / (3 * n) as f64);
+    let photos: Vec<(&[f32], Vec<bool>)> = evals
+        .iter()
+        .map(|e| (e.photo.as_slice(), e.mask.clone()))
+        .collect();
+    let psnr_constant = ins_tests::constant_colour_psnr(&photos);
     eprintln!(
         "held-out IoU {iou:.3}, PSNR in mask {psnr:.2} dB (constant colour: {psnr_constant:.2} dB)"
     );
@@ -141,23 +127,7 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     };
     // Measured where stylization trains (patches inside the mask): the mask's bounding box, so
     // the black background of the whole frame does not dominate the Gram matrices.
-    let crop = |img: RgbImage, mask: &[bool]| {
-        let w = img.width;
-        let (mut x0, mut y0, mut x1, mut y1) = (w, img.height, 0, 0);
-        for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
-            let (x, y) = (i % w, i / w);
-            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
-        }
-        let mut data = Vec::new();
-        for y in y0..y1 {
-            data.extend_from_slice(&img.data[(y * w + x0) * 3..(y * w + x1) * 3]);
-        }
-        RgbImage {
-            width: x1 - x0,
-            height: y1 - y0,
-            data,
-        }
-    };
+    let crop = |img: RgbImage, mask: &[bool]| ins_tests::crop_to_box(&img, mask);
     let mut closer = 0;
     for (a, b) in after.iter().zip(&evals) {
         let (d0, d1) = (

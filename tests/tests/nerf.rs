@@ -93,21 +93,11 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     let psnr = evals.iter().map(|e| e.psnr).sum::<f64>() / evals.len() as f64;
     // The reference: the best constant colour over the same views (what a field that learned
     // nothing but the mean colour would score).
-    let n = evals.iter().map(|e| e.photo.len() / 3).sum::<usize>() as f64;
-    let mean: [f64; 3] = std::array::from_fn(|c| {
-        evals
-            .iter()
-            .flat_map(|e| e.photo.iter().skip(c).step_by(3))
-            .map(|&v| v as f64)
-            .sum::<f64>()
-            / n
-    });
-    let se: f64 = evals
+    let photos: Vec<(&[f32], Vec<bool>)> = evals
         .iter()
-        .flat_map(|e| e.photo.chunks(3))
-        .map(|p| (0..3).map(|c| (p[c] as f64 - mean[c]).powi(2)).sum::<f64>())
-        .sum();
-    let psnr_constant = ins_core::loss::psnr(se / (3.0 * n));
+        .map(|e| (e.photo.as_slice(), vec![true; e.photo.len() / 3]))
+        .collect();
+    let psnr_constant = ins_tests::constant_colour_psnr(&photos);
     eprintln!("held-out PSNR {psnr:.2} dB (constant colour: {psnr_constant:.2} dB)");
     assert!(
         psnr > psnr_constant + 8.0,
@@ -168,23 +158,8 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     };
     // Measured on the object's bounding box (opaque pixels of the pretrained render), so the
     // white background does not dominate the Gram matrices.
-    let crop = |img: RgbImage| {
-        let w = img.width;
-        let (mut x0, mut y0, mut x1, mut y1) = (w, img.height, 0, 0);
-        for (i, _) in before.opacity.iter().enumerate().filter(|(_, o)| **o > 0.5) {
-            let (x, y) = (i % w, i / w);
-            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
-        }
-        let mut data = Vec::new();
-        for y in y0..y1 {
-            data.extend_from_slice(&img.data[(y * w + x0) * 3..(y * w + x1) * 3]);
-        }
-        RgbImage {
-            width: x1 - x0,
-            height: y1 - y0,
-            data,
-        }
-    };
+    let opaque: Vec<bool> = before.opacity.iter().map(|&o| o > 0.5).collect();
+    let crop = |img: RgbImage| ins_tests::crop_to_box(&img, &opaque);
     let (d0, d1) = (d(crop(before.image())), d(crop(after.image())));
     eprintln!("style distance on the object's box {d0} → {d1}");
     assert!(d1 < 0.5 * d0, "style distance {d0} → {d1}");
