@@ -107,11 +107,7 @@ impl ImageTask {
         device: &Device,
     ) -> Result<Self> {
         let patch = patch.fitted(content.width as u32, content.height as u32)?;
-        let targets: Vec<StyleTarget> = styles
-            .iter()
-            .map(|s| StyleTarget::from_image(&vgg, s.fit_within(style_size).to_tensor(device)))
-            .collect();
-        let style_targets = StyleTarget::stack(&targets);
+        let style_targets = StyleTarget::stacked_from_images(&vgg, styles, style_size, device);
         let content_tensor = Tensor::<1>::from_data(
             TensorData::new(content.data.clone(), [content.data.len()]),
             device,

@@ -128,11 +128,7 @@ impl SirenRunConfig {
 
     /// Loss weights: the configured ones, else the defaults for the VGG's preprocessing.
     pub fn weights(&self, preprocess: vgg_import::Preprocess) -> LossWeights {
-        let d = LossWeights::default_for(preprocess);
-        LossWeights {
-            content: self.content_weight.unwrap_or(d.content),
-            style: self.style_weight.unwrap_or(d.style),
-        }
+        LossWeights::or_defaults(preprocess, self.content_weight, self.style_weight)
     }
 
     /// The two phases. Fitting trains the content path (CIM and RGB head) with SIM and AM

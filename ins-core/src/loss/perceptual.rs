@@ -24,6 +24,21 @@ impl StyleTarget {
         Self { grams: g }
     }
 
+    /// The stacked targets (see [`StyleTarget::stack`]) of style images, each first fitted
+    /// within `max_side` pixels: what every stylizing variant trains against.
+    pub fn stacked_from_images(
+        vgg: &Vgg,
+        styles: &[crate::imaging::RgbImage],
+        max_side: usize,
+        device: &Device,
+    ) -> [Tensor<3>; 4] {
+        let targets: Vec<StyleTarget> = styles
+            .iter()
+            .map(|s| Self::from_image(vgg, s.fit_within(max_side).to_tensor(device)))
+            .collect();
+        Self::stack(&targets)
+    }
+
     /// Stacks per-image targets into `[S, C, C]` per layer, one row per image of a batch.
     pub fn stack(targets: &[StyleTarget]) -> [Tensor<3>; 4] {
         std::array::from_fn(|l| {

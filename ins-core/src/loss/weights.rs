@@ -20,6 +20,15 @@ pub struct LossWeights {
 pub const CAFFE_OVER_TORCH: f64 = 255.0 * 0.226;
 
 impl LossWeights {
+    /// The given weights where set, the defaults for `preprocess` otherwise.
+    pub fn or_defaults(preprocess: Preprocess, content: Option<f64>, style: Option<f64>) -> Self {
+        let d = Self::default_for(preprocess);
+        Self {
+            content: content.unwrap_or(d.content),
+            style: style.unwrap_or(d.style),
+        }
+    }
+
     /// Defaults for `preprocess`, equivalent to content 1 / style 2 under Caffe preprocessing.
     pub fn default_for(preprocess: Preprocess) -> Self {
         let caffe = Self {

@@ -269,10 +269,6 @@ pub fn stylize(
             .with_stylizer(n, cfg.sim_width, cfg.position_freqs, &ad)
     });
     let vgg = vgg.to_device(&ad);
-    let targets: Vec<StyleTarget> = styles
-        .iter()
-        .map(|s| StyleTarget::from_image(&vgg, s.fit_within(cfg.style_size).to_tensor(&ad)))
-        .collect();
     let (w, h) = base.scene.resolution();
     let stride = if cfg.stride > 0 {
         cfg.stride as u32
@@ -280,16 +276,11 @@ pub fn stylize(
         ((0.5 * w.min(h) as f32 / cfg.patch.max(1) as f32).round() as u32).max(1)
     };
     let patch = PatchSpec::new(cfg.patch as u32, stride).fitted(w, h)?;
-    let weights = {
-        let d = LossWeights::default_for(vgg.preprocess);
-        LossWeights {
-            content: cfg.content_weight.unwrap_or(d.content),
-            style: cfg.style_weight.unwrap_or(d.style),
-        }
-    };
+    let weights = LossWeights::or_defaults(vgg.preprocess, cfg.content_weight, cfg.style_weight);
+    let targets = StyleTarget::stacked_from_images(&vgg, &styles, cfg.style_size, &ad);
     let style = SurfaceStylization {
         vgg,
-        targets: StyleTarget::stack(&targets),
+        targets,
         codes: one_hot_codes(n, &ad),
         patch,
     };

@@ -352,22 +352,13 @@ pub fn stylize(
         )
     });
     let vgg = vgg.to_device(&ad);
-    let targets: Vec<StyleTarget> = styles
-        .iter()
-        .map(|s| StyleTarget::from_image(&vgg, s.fit_within(cfg.style_size).to_tensor(&ad)))
-        .collect();
     let (w, h) = base.scene.resolution();
     let patch = PatchSpec::new(cfg.patch as u32, patch_stride(&cfg, &base.scene)).fitted(w, h)?;
-    let weights = {
-        let d = LossWeights::default_for(vgg.preprocess);
-        LossWeights {
-            content: cfg.content_weight.unwrap_or(d.content),
-            style: cfg.style_weight.unwrap_or(d.style),
-        }
-    };
+    let weights = LossWeights::or_defaults(vgg.preprocess, cfg.content_weight, cfg.style_weight);
+    let targets = StyleTarget::stacked_from_images(&vgg, &styles, cfg.style_size, &ad);
     let style = Stylization {
         vgg,
-        targets: StyleTarget::stack(&targets),
+        targets,
         codes: one_hot_codes(n, &ad),
         teacher,
         patch,
