@@ -10,7 +10,6 @@ use ins_core::imaging::RgbImage;
 use ins_core::render::camera::Camera;
 use ins_core::render::paths::turntable_for_scene;
 use ins_core::render::sphere_tracing::TraceOptions;
-use ins_core::train::TrainOptions;
 use ins_models::config::merge_with_file;
 use ins_models::idr::config::IdrKind;
 use ins_models::idr::eval::{evaluate_views, render_camera};
@@ -40,11 +39,7 @@ pub fn train(a: TrainIdr, matches: &ArgMatches) -> Result<()> {
     let kind = cfg.kind()?;
     let backend = a.run.backend.resolve();
     let device = backend.device();
-    let mut opts = TrainOptions::new(&a.out);
-    opts.seed = cfg.seed;
-    opts.checkpoint_every = cfg.checkpoint_every;
-    opts.resume = a.run.resume;
-    opts.quiet = a.run.quiet;
+    let opts = a.run.train_options(&a.out, cfg.seed, cfg.checkpoint_every);
     let outcome = match kind {
         IdrKind::Pretrain => {
             eprintln!(
@@ -64,15 +59,7 @@ pub fn train(a: TrainIdr, matches: &ArgMatches) -> Result<()> {
             ins_models::idr::stylize(&cfg, vgg, &device, opts)?
         }
     };
-    println!(
-        "{}",
-        serde_json::json!({
-            "run": a.out,
-            "steps": outcome.steps,
-            "seconds": (outcome.seconds * 10.0).round() / 10.0,
-            "last": outcome.last,
-        })
-    );
+    crate::siren_cmd::print_summary(&a.out, &outcome);
     eprintln!(
         "done in {:.1} s: see {}/val/; render with `ins-cli render idr --run {}`, mesh with `ins-cli export mesh --run {}`",
         outcome.seconds,

@@ -10,7 +10,6 @@ use ins_core::data::Split;
 use ins_core::imaging::RgbImage;
 use ins_core::render::camera::Camera;
 use ins_core::render::paths::{spiral_for_scene, turntable_for_scene};
-use ins_core::train::TrainOptions;
 use ins_models::config::merge_with_file;
 use ins_models::nerf::config::RunKind;
 use ins_models::nerf::eval::{ViewRender, evaluate_views, render_camera};
@@ -39,11 +38,7 @@ pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
     let kind = cfg.kind()?;
     let backend = a.run.backend.resolve();
     let device = backend.device();
-    let mut opts = TrainOptions::new(&a.out);
-    opts.seed = cfg.seed;
-    opts.checkpoint_every = cfg.checkpoint_every;
-    opts.resume = a.run.resume;
-    opts.quiet = a.run.quiet;
+    let opts = a.run.train_options(&a.out, cfg.seed, cfg.checkpoint_every);
     let outcome = match kind {
         RunKind::Pretrain => {
             eprintln!(
@@ -70,15 +65,7 @@ pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
             ins_models::nerf::stylize(&cfg, vgg, &device, opts)?
         }
     };
-    println!(
-        "{}",
-        serde_json::json!({
-            "run": a.out,
-            "steps": outcome.steps,
-            "seconds": (outcome.seconds * 10.0).round() / 10.0,
-            "last": outcome.last,
-        })
-    );
+    crate::siren_cmd::print_summary(&a.out, &outcome);
     eprintln!(
         "done in {:.1} s: see {}/val/ and loss_curve.png; render with `ins-cli render nerf --run {}`",
         outcome.seconds,

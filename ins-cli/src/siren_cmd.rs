@@ -29,6 +29,29 @@ pub struct RunArgs {
     pub quiet: bool,
 }
 
+impl RunArgs {
+    /// The trainer's options for a run into `out` with the config's seed and checkpoint interval.
+    pub fn train_options(&self, out: &Path, seed: u64, checkpoint_every: usize) -> TrainOptions {
+        let mut opts = TrainOptions::new(out);
+        opts.seed = seed;
+        opts.checkpoint_every = checkpoint_every;
+        opts.resume = self.resume;
+        opts.quiet = self.quiet;
+        opts
+    }
+}
+
+/// The one JSON line a finished `train` prints on stdout.
+pub fn print_summary<M>(out: &Path, outcome: &ins_core::train::TrainOutcome<M>) {
+    let summary = serde_json::json!({
+        "run": out,
+        "steps": outcome.steps,
+        "seconds": (outcome.seconds * 10.0).round() / 10.0,
+        "last": outcome.last,
+    });
+    println!("{summary}");
+}
+
 #[derive(Args, Debug)]
 pub struct TrainSiren {
     /// Run folder (images, loss curve, metrics, config, checkpoints).
@@ -111,19 +134,9 @@ pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
         vgg.preprocess,
         a.out.display()
     );
-    let mut opts = TrainOptions::new(&a.out);
-    opts.seed = cfg.seed;
-    opts.checkpoint_every = cfg.checkpoint_every;
-    opts.resume = a.run.resume;
-    opts.quiet = a.run.quiet;
+    let opts = a.run.train_options(&a.out, cfg.seed, cfg.checkpoint_every);
     let outcome = ins_models::siren::train(&cfg, vgg, &device, opts)?;
-    let summary = serde_json::json!({
-        "run": a.out,
-        "steps": outcome.steps,
-        "seconds": (outcome.seconds * 10.0).round() / 10.0,
-        "last": outcome.last,
-    });
-    println!("{summary}");
+    print_summary(&a.out, &outcome);
     eprintln!(
         "done in {:.1} s: see {}/preview.png, stylized*.png and loss_curve.png",
         outcome.seconds,
