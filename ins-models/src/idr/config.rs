@@ -44,6 +44,13 @@ pub struct IdrRunConfig {
     /// Radius of the initial sphere.
     #[arg(long, default_value_t = 0.6)]
     pub init_radius: f64,
+    /// `grid` SDF: finest resolution of the hash encoding over the unit sphere's cube (finer
+    /// levels fit finer texture but leave the surface, and so its normals, noisier).
+    #[arg(long, default_value_t = 1024)]
+    pub grid_max_resolution: u32,
+    /// Width of the colour network's hidden layers.
+    #[arg(long, default_value_t = 64)]
+    pub color_width: usize,
     /// Weight of the mask loss (IDR: 100).
     #[arg(long, default_value_t = 100.0)]
     pub mask_weight: f64,
@@ -130,6 +137,8 @@ impl IdrRunConfig {
         IdrArch {
             sdf: self.sdf,
             radius: self.init_radius,
+            grid_max_resolution: self.grid_max_resolution,
+            color_width: self.color_width,
         }
     }
 

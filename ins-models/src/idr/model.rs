@@ -93,6 +93,10 @@ pub struct IdrArch {
     pub sdf: SdfKind,
     /// Radius of the initial sphere.
     pub radius: f64,
+    /// `grid`: finest hash-encoding resolution.
+    pub grid_max_resolution: u32,
+    /// Hidden width of the colour network (`grid`; the `mlp` SDF keeps IDR's).
+    pub color_width: usize,
 }
 
 impl IdrModel {
@@ -109,7 +113,7 @@ impl IdrModel {
                 let grid = HashGridConfig::new()
                     .with_log2_table(17)
                     .with_base_resolution(16)
-                    .with_max_resolution(1024);
+                    .with_max_resolution(arch.grid_max_resolution);
                 let net = SdfNet::Grid(
                     SdfGridConfig::new(grid)
                         .with_radius(arch.radius)
@@ -118,7 +122,7 @@ impl IdrModel {
                 // One octave of view direction: with the grid's sharper features, more octaves let
                 // the colour fit each training view on its own and miss the views between them.
                 let c = SurfaceColorConfig::new(net.d_features())
-                    .with_d_hidden(64)
+                    .with_d_hidden(arch.color_width)
                     .with_depth(2)
                     .with_dir_freqs(1)
                     .init(device);
