@@ -3,7 +3,7 @@
 
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{StyleTarget, content_loss, style_loss};
+use ins_core::loss::{self, StyleTarget};
 use ins_models::demo::{demo_content, demo_style};
 use ins_models::siren::{SirenRun, train};
 use ins_tests::{quiet_options, real_vgg, save_image, small_config};
@@ -30,14 +30,13 @@ fn stripes(size: usize) -> RgbImage {
 }
 
 /// Style distance of an image to a style image (the loss the trainer minimises).
-fn style_distance(vgg: &Vgg, img: &RgbImage, style: &RgbImage, device: &Device) -> f32 {
+fn style_distance(vgg: &Vgg, img: &RgbImage, style: &RgbImage, device: &Device) -> f64 {
     let t = StyleTarget::from_image(vgg, style.to_tensor(device)).grams;
-    style_loss(&vgg.features(img.to_tensor(device)), &t).into_scalar::<f32>()
+    loss::style_distance(vgg, img.to_tensor(device), &t)
 }
 
-fn content_distance(vgg: &Vgg, img: &RgbImage, content: &RgbImage, device: &Device) -> f32 {
-    let target = vgg.features(content.to_tensor(device)).relu2_2;
-    content_loss(&vgg.features(img.to_tensor(device)), &target).into_scalar::<f32>()
+fn content_distance(vgg: &Vgg, img: &RgbImage, content: &RgbImage, device: &Device) -> f64 {
+    loss::content_distance(vgg, img.to_tensor(device), content.to_tensor(device))
 }
 
 #[test]
@@ -115,7 +114,7 @@ fn two_styles_condition_the_render_and_interpolate_monotonically() {
         "[0,1] render is not nearer style 2"
     );
     // Along the interpolation the render moves away from style 1 towards style 2.
-    let steps: Vec<f32> = (0..5)
+    let steps: Vec<f64> = (0..5)
         .map(|i| {
             let t = i as f32 / 4.0;
             let img = run.render(48, 48, &[1.0 - t, t], &device).unwrap();

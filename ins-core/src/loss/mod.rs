@@ -11,7 +11,7 @@ pub mod ssim;
 pub mod weights;
 
 pub use gram::gram;
-pub use perceptual::{StyleTarget, content_loss, style_loss};
+pub use perceptual::{StyleTarget, content_distance, content_loss, style_distance, style_loss};
 pub use pixel::{mse, psnr};
 pub use ssim::ssim;
 pub use weights::LossWeights;

@@ -78,3 +78,15 @@ pub fn style_distances(features: &VggFeatures, targets: &[Tensor<3>; 4]) -> [f32
 pub fn content_loss(features: &VggFeatures, target: &Tensor<4>) -> Tensor<1> {
     (features.relu2_2.clone() - target.clone()).square().mean()
 }
+
+/// The style loss of an RGB image `[1, 3, H, W]` against Gram targets, as a number: how far an
+/// image is from a painting's style, by the definition training minimises.
+pub fn style_distance(vgg: &Vgg, rgb: Tensor<4>, targets: &[Tensor<3>; 4]) -> f64 {
+    style_loss(&vgg.features(rgb), targets).into_scalar::<f32>() as f64
+}
+
+/// The content loss between two RGB images of the same size (relu2_2 mean squared difference).
+pub fn content_distance(vgg: &Vgg, rgb: Tensor<4>, reference: Tensor<4>) -> f64 {
+    let target = vgg.features(reference).relu2_2;
+    content_loss(&vgg.features(rgb), &target).into_scalar::<f32>() as f64
+}
