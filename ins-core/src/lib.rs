@@ -7,6 +7,7 @@
 pub mod backend;
 pub mod contain;
 pub mod data;
+pub mod eval;
 pub mod imaging;
 pub mod loss;
 pub mod mesh;
