@@ -6,6 +6,7 @@ mod data_cmd;
 mod idr_cmd;
 mod nerf_cmd;
 mod siren_cmd;
+mod stylize2d_cmd;
 mod vgg_cmd;
 mod video;
 mod view_size;
@@ -58,6 +59,8 @@ enum Command {
         #[command(subcommand)]
         command: data_cmd::DataCommand,
     },
+    /// Classic 2D style transfer (Gatys) of an image, or of each frame of a folder on its own.
+    Stylize2d(stylize2d_cmd::Stylize2d),
     /// Benchmark workloads of BENCHMARKS.md (one JSON line each).
     Bench(bench::BenchArgs),
 }
@@ -128,6 +131,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
         },
         Command::Vgg { command } => vgg_cmd::run(command),
         Command::Data { command } => data_cmd::run(command),
+        Command::Stylize2d(a) => stylize2d_cmd::run(a),
         Command::Bench(args) => bench::run(args),
     }
 }

@@ -2,34 +2,9 @@
 //! features, and bad input that must end in one clear message naming the file, never a panic.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn cli(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ins-cli"))
-        .args(args)
-        .env("INS_NO_GPU", "1")
-        .output()
-        .expect("running ins-cli")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
-
-fn assert_clean_failure(o: &Output, needle: &str) {
-    let e = stderr(o);
-    assert_eq!(
-        o.status.code(),
-        Some(1),
-        "exit status {:?}, stderr: {e}",
-        o.status
-    );
-    assert!(e.contains(needle), "stderr does not name {needle:?}: {e}");
-    assert!(
-        !e.contains("panicked") && !e.contains("RUST_BACKTRACE"),
-        "panic output: {e}"
-    );
-}
+mod common;
+use common::*;
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

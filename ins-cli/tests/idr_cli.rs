@@ -2,35 +2,8 @@
 //! written by `ins-cli data synth`, and the bad inputs that must end in one clear message with
 //! nothing written over.
 
-use std::path::Path;
-use std::process::{Command, Output};
-
-fn cli(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ins-cli"))
-        .args(args)
-        .env("INS_NO_GPU", "1")
-        .output()
-        .expect("running ins-cli")
-}
-
-fn ok(o: Output) -> Output {
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    o
-}
-
-fn assert_clean_failure(o: &Output, needle: &str) {
-    let e = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success(), "should have failed");
-    assert!(e.contains(needle), "stderr does not name {needle:?}: {e}");
-    assert!(
-        !e.contains("panicked") && !e.contains("internal failure"),
-        "panic output: {e}"
-    );
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+mod common;
+use common::*;
 
 #[test]
 fn train_render_eval_export_and_refuse_bad_input() {

@@ -1,62 +1,9 @@
 //! `ins-cli train/render/eval nerf` as a user meets them, on a small scene written by
 //! `ins-cli data synth`, and the bad inputs that must end in one clear message.
 
-use std::path::Path;
-use std::process::{Command, Output};
 
-fn cli(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ins-cli"))
-        .args(args)
-        .env("INS_NO_GPU", "1")
-        .output()
-        .expect("running ins-cli")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
-
-fn ok(o: Output) -> Output {
-    assert!(o.status.success(), "{}", stderr(&o));
-    o
-}
-
-fn assert_clean_failure(o: &Output, needle: &str) {
-    let e = stderr(o);
-    assert!(!o.status.success(), "should have failed");
-    assert!(e.contains(needle), "stderr does not name {needle:?}: {e}");
-    assert!(
-        !e.contains("panicked") && !e.contains("RUST_BACKTRACE"),
-        "panic output: {e}"
-    );
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// A tiny grid pretraining run on a synthetic Blender scene.
-const TINY: &[&str] = &[
-    "--steps",
-    "40",
-    "--target-samples",
-    "8192",
-    "--log2-table",
-    "12",
-    "--max-resolution",
-    "64",
-    "--occupancy-resolution",
-    "16",
-    "--eval-every",
-    "20",
-    "--eval-views",
-    "1",
-    "--checkpoint-every",
-    "20",
-    "--quiet",
-    "--backend",
-    "flex",
-];
+mod common;
+use common::*;
 
 #[test]
 fn pretrain_render_eval_stylize_and_refuse_bad_input() {
@@ -76,7 +23,7 @@ fn pretrain_render_eval_stylize_and_refuse_bad_input() {
     ]));
     let run = dir.path().join("run");
     let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
-    args.extend_from_slice(TINY);
+    args.extend_from_slice(NERF_TINY);
     let o = ok(cli(&args));
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary["steps"], 40);

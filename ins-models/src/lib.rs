@@ -7,6 +7,7 @@
 //! - [`idr`]: IDR + INS, stylized implicit surfaces from masked multi-view photos.
 //! - [`image_task`]: the image-fitting and stylization task any coordinate → RGB model uses
 //!   (SIREN, or a user's own content module).
+//! - [`stylize2d`]: classic 2D style transfer of one image, and the per-view baseline.
 
 pub mod config;
 pub mod demo;
@@ -15,3 +16,4 @@ pub mod image_task;
 pub mod nerf;
 pub mod siren;
 pub mod style_mix;
+pub mod stylize2d;

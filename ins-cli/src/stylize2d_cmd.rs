@@ -1,0 +1,231 @@
+//! `ins-cli stylize2d`: classic 2D style transfer of one image, or of every frame of a folder
+//! independently (the per-view baseline of the consistency evaluation).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+use clap::Args;
+use ins_core::backend::BackendChoice;
+use ins_core::data::images::list_images;
+use ins_core::imaging::RgbImage;
+use ins_core::loss::LossWeights;
+use ins_core::train::TrainOptions;
+use ins_models::stylize2d::{Stylize2dSettings, stylize};
+use vgg_import::{Vgg, load_vgg};
+
+use crate::vgg_cmd::VggArgs;
+
+#[derive(Args, Debug)]
+pub struct Stylize2d {
+    /// Content image (PNG or JPEG).
+    #[arg(long, required_unless_present = "frames", conflicts_with = "frames")]
+    content: Option<PathBuf>,
+    /// Stylize every image of this folder on its own instead (`--out` is then a folder; frames
+    /// already there are kept, so an interrupted run continues where it stopped).
+    #[arg(long, value_name = "DIR")]
+    frames: Option<PathBuf>,
+    /// Painting whose style to transfer.
+    #[arg(long)]
+    style: PathBuf,
+    /// Output PNG (a folder with --frames). Metrics and the loss curve go beside it, in
+    /// `<out>.run/`.
+    #[arg(long)]
+    out: PathBuf,
+    /// Optimisation steps.
+    #[arg(long, default_value_t = 200)]
+    steps: usize,
+    /// Longer side of the content at most, in pixels (larger images are scaled down; 0: their
+    /// own size).
+    #[arg(long, default_value_t = 256)]
+    size: usize,
+    /// Longer side of the painting for its Gram targets.
+    #[arg(long, default_value_t = 256)]
+    style_size: usize,
+    /// Adam learning rate in pixel units.
+    #[arg(long, default_value_t = 0.02)]
+    lr: f64,
+    /// Style loss weight (default: per VGG preprocessing, as for every variant).
+    #[arg(long)]
+    style_weight: Option<f64>,
+    /// Content loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    content_weight: Option<f64>,
+    /// Backend: auto, flex, ndarray or wgpu.
+    #[arg(long, default_value = "auto")]
+    backend: BackendChoice,
+    /// Continue a single-image run from its newest checkpoint.
+    #[arg(long)]
+    resume: bool,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+    #[command(flatten)]
+    vgg: VggArgs,
+}
+
+impl Stylize2d {
+    fn settings(&self, vgg: &Vgg) -> Stylize2dSettings {
+        Stylize2dSettings {
+            steps: self.steps,
+            lr: self.lr,
+            weights: LossWeights::or_defaults(
+                vgg.preprocess,
+                self.content_weight,
+                self.style_weight,
+            ),
+            style_size: self.style_size,
+        }
+    }
+
+    fn load_content(&self, path: &Path) -> Result<RgbImage> {
+        let img = RgbImage::load(path)?;
+        let img = if self.size > 0 && img.width.max(img.height) > self.size {
+            img.fit_within(self.size)
+        } else {
+            img
+        };
+        if img.width < 16 || img.height < 16 {
+            bail!(
+                "{}: {}×{} at --size {} is too small for VGG (at least 16 px per side)",
+                path.display(),
+                img.width,
+                img.height,
+                self.size
+            );
+        }
+        Ok(img)
+    }
+}
+
+/// `<out>.run`: where the trainer's metrics, plot and checkpoints of an output go.
+fn run_dir(out: &Path) -> PathBuf {
+    let mut s = out.as_os_str().to_owned();
+    s.push(".run");
+    PathBuf::from(s)
+}
+
+pub fn run(a: Stylize2d) -> Result<()> {
+    if a.steps == 0 {
+        bail!("--steps must be at least 1");
+    }
+    let style = RgbImage::load(&a.style)?;
+    let backend = a.backend.resolve();
+    let device = backend.device();
+    let vgg = load_vgg(&a.vgg.source(), &device)?;
+    let settings = a.settings(&vgg);
+    let options = |out: &Path, resume: bool, checkpoint_every: usize| {
+        let mut o = TrainOptions::new(run_dir(out));
+        o.checkpoint_every = checkpoint_every;
+        o.resume = resume;
+        o.quiet = a.quiet;
+        o
+    };
+    match (&a.content, &a.frames) {
+        (Some(content), _) => {
+            let img = a.load_content(content)?;
+            eprintln!(
+                "stylizing {} ({}×{}) with {} on {backend}, {} steps",
+                content.display(),
+                img.width,
+                img.height,
+                a.style.display(),
+                a.steps
+            );
+            let opts = options(&a.out, a.resume, 100);
+            let (result, outcome) = stylize(&img, &style, vgg, &settings, opts, &device)?;
+            result.save(&a.out)?;
+            crate::siren_cmd::print_summary(&a.out, &outcome);
+        }
+        (None, Some(dir)) => {
+            let frames = list_images(dir)?;
+            if frames.is_empty() {
+                bail!("{}: no PNG or JPEG images in this folder", dir.display());
+            }
+            let started = std::time::Instant::now();
+            let load = |p: &Path| a.load_content(p);
+            let each = FrameRun {
+                style: &style,
+                vgg: &vgg,
+                settings: &settings,
+                quiet: a.quiet,
+                keep_runs: true,
+                device: &device,
+            };
+            stylize_frames(&frames, &a.out, load, &each)?;
+            println!(
+                "{}",
+                serde_json::json!({
+                    "frames": frames.len(),
+                    "out": a.out,
+                    "seconds": (started.elapsed().as_secs_f64() * 10.0).round() / 10.0,
+                })
+            );
+        }
+        (None, None) => bail!("give --content IMAGE or --frames DIR"),
+    }
+    Ok(())
+}
+
+/// What every frame of a per-frame 2D stylization shares.
+pub struct FrameRun<'a> {
+    /// The painting.
+    pub style: &'a RgbImage,
+    /// VGG-16.
+    pub vgg: &'a Vgg,
+    /// Steps, learning rate, weights.
+    pub settings: &'a Stylize2dSettings,
+    /// No progress bars.
+    pub quiet: bool,
+    /// Keep each frame's metrics and loss curve in `<frame>.png.run/`.
+    pub keep_runs: bool,
+    /// Where to compute.
+    pub device: &'a burn::prelude::Device,
+}
+
+/// Stylizes each of `frames` on its own into `out/<stem>.png`; frames already there are kept,
+/// so an interrupted run continues where it stopped.
+pub fn stylize_frames(
+    frames: &[PathBuf],
+    out_dir: &Path,
+    load: impl Fn(&Path) -> Result<RgbImage>,
+    run: &FrameRun,
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(out_dir).map_err(|e| anyhow::anyhow!("{}: {e}", out_dir.display()))?;
+    let mut written = Vec::with_capacity(frames.len());
+    for (i, frame) in frames.iter().enumerate() {
+        let name = frame.file_stem().unwrap_or_default().to_string_lossy();
+        let out = out_dir.join(format!("{name}.png"));
+        written.push(out.clone());
+        if out.exists() {
+            eprintln!(
+                "frame {}/{}: {} exists, kept",
+                i + 1,
+                frames.len(),
+                out.display()
+            );
+            continue;
+        }
+        eprintln!("frame {}/{}: {}", i + 1, frames.len(), frame.display());
+        let img = load(frame)?;
+        // One frame is minutes at most: no checkpoints, the finished frames are the progress
+        // an interrupted run keeps.
+        let mut opts = TrainOptions::new(run_dir(&out));
+        opts.checkpoint_every = 0;
+        opts.quiet = run.quiet;
+        let (result, _) = stylize(
+            &img,
+            run.style,
+            run.vgg.clone(),
+            run.settings,
+            opts,
+            run.device,
+        )?;
+        result.save(&out)?;
+        if run.keep_runs {
+            let _ = std::fs::remove_dir_all(run_dir(&out).join("checkpoints"));
+        } else {
+            let _ = std::fs::remove_dir_all(run_dir(&out));
+        }
+    }
+    Ok(written)
+}

@@ -1,0 +1,70 @@
+//! What every CLI test does: run `ins-cli` (no GPU probing), read its stderr, and check that a
+//! failure is one clear message, never a panic.
+#![allow(dead_code)] // each test file uses its own subset
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// Runs `ins-cli args…` to completion.
+pub fn cli(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ins-cli"))
+        .args(args)
+        .env("INS_NO_GPU", "1")
+        .output()
+        .expect("running ins-cli")
+}
+
+/// The command's stderr as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+/// `o`, after asserting it succeeded (its stderr otherwise).
+pub fn ok(o: Output) -> Output {
+    assert!(o.status.success(), "{}", stderr(&o));
+    o
+}
+
+/// The command failed with exit status 1 (2: a usage error caught by the argument parser) and
+/// a message naming `needle`, with no panic output.
+pub fn assert_clean_failure(o: &Output, needle: &str) {
+    let e = stderr(o);
+    assert!(
+        matches!(o.status.code(), Some(1 | 2)),
+        "exit status {:?}, stderr: {e}",
+        o.status
+    );
+    assert!(e.contains(needle), "stderr does not name {needle:?}: {e}");
+    assert!(
+        !e.contains("panicked") && !e.contains("RUST_BACKTRACE") && !e.contains("internal failure"),
+        "panic output: {e}"
+    );
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Flags of a tiny grid NeRF pretraining run (seconds on a synthetic scene).
+pub const NERF_TINY: &[&str] = &[
+    "--steps",
+    "40",
+    "--target-samples",
+    "8192",
+    "--log2-table",
+    "12",
+    "--max-resolution",
+    "64",
+    "--occupancy-resolution",
+    "16",
+    "--eval-every",
+    "20",
+    "--eval-views",
+    "1",
+    "--checkpoint-every",
+    "20",
+    "--quiet",
+    "--backend",
+    "flex",
+];

@@ -1,0 +1,147 @@
+//! Classic 2D style transfer (Gatys et al., CVPR 2016): optimise the pixels of one image so that
+//! its VGG Gram matrices match the painting's while its relu2_2 features stay the content's.
+//!
+//! It uses the same VGG, the same losses and the same weight convention as the stylizing
+//! variants, so it is both a product feature (`ins-cli stylize2d`) and the per-view baseline
+//! that stylized 3D representations are measured against: each frame stylized on its own knows
+//! nothing of its neighbours.
+
+use anyhow::Result;
+use burn::module::Param;
+use burn::prelude::*;
+use ins_core::imaging::RgbImage;
+use ins_core::loss::{LossWeights, StyleTarget, content_loss, style_loss};
+use ins_core::train::{
+    GroupSpec, LossTerms, Optimizable, Phase, StepContext, Task, TrainOptions, TrainOutcome,
+    Trainer,
+};
+use serde::{Deserialize, Serialize};
+use vgg_import::Vgg;
+
+/// The optimised image: its pixels are the parameters, `[1, 3, H, W]`, read through a clamp to
+/// [0, 1] (a pixel pushed out of range stops moving further out).
+#[derive(Module, Debug)]
+pub struct Canvas {
+    /// Pixels, starting as the content image.
+    pub pixels: Param<Tensor<4>>,
+}
+
+const CANVAS_GROUPS: &[GroupSpec] = &[GroupSpec::new("pixels", &["pixels"])];
+
+impl Optimizable for Canvas {
+    fn groups(&self) -> &'static [GroupSpec] {
+        CANVAS_GROUPS
+    }
+}
+
+impl Canvas {
+    /// A canvas holding `image`.
+    pub fn new(image: &RgbImage, device: &Device) -> Self {
+        Self {
+            pixels: Param::from_tensor(image.to_tensor(device)),
+        }
+    }
+
+    /// The image, `[1, 3, H, W]` in [0, 1].
+    pub fn image(&self) -> Tensor<4> {
+        self.pixels.val().clamp(0.0, 1.0)
+    }
+
+    /// The image as an [`RgbImage`].
+    pub fn to_rgb(&self) -> Result<RgbImage> {
+        RgbImage::from_hwc(self.image().detach().squeeze_dim::<3>(0).permute([1, 2, 0]))
+    }
+}
+
+/// What the one phase of a 2D stylization computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Stylize2dObjective {
+    /// Gram style loss to the painting and relu2_2 content loss to the content image.
+    Stylize,
+}
+
+/// Settings of one 2D stylization.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stylize2dSettings {
+    /// Optimisation steps.
+    pub steps: usize,
+    /// Adam learning rate, in pixel units (colours in [0, 1]).
+    pub lr: f64,
+    /// Style and content weights.
+    pub weights: LossWeights,
+    /// Longer side of the painting for its Gram targets.
+    pub style_size: usize,
+}
+
+/// The task: fixed targets, one image to optimise.
+pub struct Stylize2dTask {
+    vgg: Vgg,
+    style: [Tensor<3>; 4],
+    content: Tensor<4>,
+}
+
+impl Stylize2dTask {
+    /// Targets of `content` and `style` through `vgg`, which lives on `device`.
+    pub fn new(
+        vgg: Vgg,
+        content: &RgbImage,
+        style: &RgbImage,
+        style_size: usize,
+        device: &Device,
+    ) -> Self {
+        let style =
+            StyleTarget::stacked_from_images(&vgg, std::slice::from_ref(style), style_size, device);
+        let content = vgg.features(content.to_tensor(device)).relu2_2.detach();
+        Self {
+            vgg,
+            style,
+            content,
+        }
+    }
+}
+
+impl Task for Stylize2dTask {
+    type Model = Canvas;
+    type Objective = Stylize2dObjective;
+
+    fn terms(&self, _objective: Stylize2dObjective) -> &'static [&'static str] {
+        &["style", "content"]
+    }
+
+    fn losses(
+        &mut self,
+        model: &Canvas,
+        _step: &StepContext<Stylize2dObjective>,
+    ) -> Result<LossTerms> {
+        let feats = self.vgg.features(model.image());
+        Ok(LossTerms::default()
+            .term("style", style_loss(&feats, &self.style))
+            .term("content", content_loss(&feats, &self.content)))
+    }
+}
+
+/// Stylizes `content` with `style` through the trainer (progress, metrics and checkpoints in
+/// `opts.out_dir`); returns the image and the trainer's outcome.
+pub fn stylize(
+    content: &RgbImage,
+    style: &RgbImage,
+    vgg: Vgg,
+    settings: &Stylize2dSettings,
+    opts: TrainOptions,
+    device: &Device,
+) -> Result<(RgbImage, TrainOutcome<Canvas>)> {
+    let ad = device.clone().autodiff();
+    let mut task = Stylize2dTask::new(vgg.to_device(&ad), content, style, settings.style_size, &ad);
+    let phase = Phase::new(
+        "stylize",
+        Stylize2dObjective::Stylize,
+        settings.steps,
+        settings.lr,
+    )
+    .weight("style", settings.weights.style)
+    .weight("content", settings.weights.content);
+    let outcome = Trainer::new(vec![phase], opts).run(&mut task, Canvas::new(content, &ad))?;
+    let image = outcome.model.to_rgb()?;
+    Ok((image, outcome))
+}
