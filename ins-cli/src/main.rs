@@ -2,9 +2,11 @@
 //! representations.
 
 mod bench;
+mod consistency_cmd;
 mod data_cmd;
 mod idr_cmd;
 mod nerf_cmd;
+mod report_cmd;
 mod siren_cmd;
 mod stylize2d_cmd;
 mod vgg_cmd;
@@ -61,6 +63,9 @@ enum Command {
     },
     /// Classic 2D style transfer (Gatys) of an image, or of each frame of a folder on its own.
     Stylize2d(stylize2d_cmd::Stylize2d),
+    /// A static HTML report of a stylized NeRF run: views, animations, depth, loss curves,
+    /// consistency and style tables (runs `eval consistency` first if needed).
+    Report(report_cmd::Report),
     /// Benchmark workloads of BENCHMARKS.md (one JSON line each).
     Bench(bench::BenchArgs),
 }
@@ -91,6 +96,9 @@ enum EvalVariant {
     Nerf(nerf_cmd::EvalNerf),
     /// Silhouette IoU and PSNR inside the mask on the held-out views of an IDR run.
     Idr(idr_cmd::EvalIdr),
+    /// View consistency of a stylized NeRF along a path (frames warped by the pretrained
+    /// depth), against the per-view 2D baseline; Gram and content distances per view.
+    Consistency(consistency_cmd::EvalConsistency),
 }
 
 #[derive(Subcommand, Debug)]
@@ -125,6 +133,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
         Command::Eval { variant } => match variant {
             EvalVariant::Nerf(a) => nerf_cmd::eval(a),
             EvalVariant::Idr(a) => idr_cmd::eval(a),
+            EvalVariant::Consistency(a) => consistency_cmd::run(a),
         },
         Command::Export { command } => match command {
             ExportCommand::Mesh(a) => idr_cmd::export_mesh(a),
@@ -132,6 +141,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
         Command::Vgg { command } => vgg_cmd::run(command),
         Command::Data { command } => data_cmd::run(command),
         Command::Stylize2d(a) => stylize2d_cmd::run(a),
+        Command::Report(a) => report_cmd::run(a),
         Command::Bench(args) => bench::run(args),
     }
 }

@@ -12,7 +12,7 @@ use ins_core::render::camera::Camera;
 use ins_core::render::paths::{spiral_for_scene, turntable_for_scene};
 use ins_models::config::merge_with_file;
 use ins_models::nerf::config::RunKind;
-use ins_models::nerf::eval::{ViewRender, evaluate_views, render_camera};
+use ins_models::nerf::eval::{ViewRender, depth_agreement, evaluate_views, render_camera};
 use ins_models::nerf::{NerfRun, NerfRunConfig};
 use vgg_import::load_vgg;
 
@@ -162,13 +162,7 @@ pub fn render(a: RenderNerf) -> Result<()> {
             .map(|&i| (scene.views[i].camera.clone(), format!("{split}_{i:03}.png")))
             .unzip()
     } else {
-        let kind = c.path.as_deref().unwrap_or(default_path(&run));
-        let cams = match kind {
-            "spiral" => spiral_for_scene(scene, a.frames),
-            "turntable" => turntable_for_scene(scene, a.frames),
-            other => bail!("unknown --path {other:?} (expected spiral or turntable)"),
-        }
-        .context("the scene has no cameras to build a path from")?;
+        let cams = path_cameras(&run, c.path.as_deref(), a.frames)?;
         let names = (0..cams.len())
             .map(|i| format!("frame_{i:04}.png"))
             .collect();
@@ -188,11 +182,25 @@ pub fn render(a: RenderNerf) -> Result<()> {
     Ok(())
 }
 
-fn default_path(run: &NerfRun) -> &'static str {
+/// The path of a scene when none is asked for: the LLFF spiral for forward-facing scenes, a
+/// turntable for the others.
+pub fn default_path(run: &NerfRun) -> &'static str {
     match run.scene.format {
         ins_core::data::SceneFormat::Llff => "spiral",
         _ => "turntable",
     }
+}
+
+/// The cameras of a `--path` (spiral or turntable; default: spiral for forward-facing scenes,
+/// turntable for the others) of `frames` frames.
+pub fn path_cameras(run: &NerfRun, kind: Option<&str>, frames: usize) -> Result<Vec<Camera>> {
+    let scene = &run.scene;
+    match kind.unwrap_or(default_path(run)) {
+        "spiral" => spiral_for_scene(scene, frames),
+        "turntable" => turntable_for_scene(scene, frames),
+        other => bail!("unknown --path {other:?} (expected spiral or turntable)"),
+    }
+    .context("the scene has no cameras to build a path from")
 }
 
 #[derive(Args, Debug)]
@@ -206,29 +214,6 @@ pub struct EvalNerf {
     /// Backend.
     #[arg(long, default_value = "auto")]
     backend: BackendChoice,
-}
-
-/// Relative depth error and opacity agreement of two renders of one view.
-fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> (f64, f64, usize) {
-    let mut errors = Vec::new();
-    let mut agree = 0usize;
-    for i in 0..student.opacity.len() {
-        let (os, ot) = (student.opacity[i], teacher.opacity[i]);
-        if (os > 0.5) == (ot > 0.5) {
-            agree += 1;
-        }
-        if os > 0.5 && ot > 0.5 {
-            let (ds, dt) = (student.depth[i] / os, teacher.depth[i] / ot);
-            errors.push(((ds - dt).abs() / dt.abs().max(1e-6)) as f64);
-        }
-    }
-    errors.sort_by(f64::total_cmp);
-    let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
-    (
-        median,
-        agree as f64 / student.opacity.len().max(1) as f64,
-        errors.len(),
-    )
 }
 
 pub fn eval(a: EvalNerf) -> Result<()> {

@@ -1,7 +1,6 @@
 //! `ins-cli train/render/eval nerf` as a user meets them, on a small scene written by
 //! `ins-cli data synth`, and the bad inputs that must end in one clear message.
 
-
 mod common;
 use common::*;
 

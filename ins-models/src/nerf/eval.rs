@@ -5,10 +5,11 @@ use std::path::Path;
 
 use anyhow::Result;
 use burn::prelude::*;
-use ins_core::data::Scene;
+use ins_core::data::{Scene, SceneFormat};
 use ins_core::imaging::{RgbImage, depth_image};
 use ins_core::loss::{psnr, ssim};
 use ins_core::render::camera::Camera;
+use ins_core::render::geometry::Vec3;
 use ins_core::render::rays::camera_rays;
 
 use super::model::NerfModel;
@@ -56,6 +57,37 @@ impl ViewRender {
         }
         depth_image(&self.depth, &self.opacity, self.width, self.height, lo, hi)
     }
+
+    /// The surface point each pixel sees (the expected ray distance over the opacity), in the
+    /// scene frame, for a render of `camera` in `scene`; `None` where the opacity is below 0.5.
+    /// Forward-facing scenes render in NDC; their points are mapped back to the world ray.
+    pub fn surface_points(&self, scene: &Scene, camera: &Camera) -> Vec<Option<Vec3>> {
+        let world = camera_rays(camera, |o, d| scene.ray_range(o, d));
+        let ndc = matches!(scene.format, SceneFormat::Llff)
+            .then(|| RenderRays::for_scene(scene, world.clone()).rays);
+        (0..self.opacity.len())
+            .map(|i| {
+                let o = self.opacity[i];
+                if o <= 0.5 {
+                    return None;
+                }
+                let t = self.depth[i] / o;
+                match &ndc {
+                    None => Some(world.point(i, t)),
+                    Some(ndc) => {
+                        // NDC z = 1 + 2·near/z_world with near = 1 (see `Rays::to_ndc`).
+                        let z_ndc = ndc.point(i, t).z;
+                        if z_ndc >= 1.0 {
+                            return None;
+                        }
+                        let z = 2.0 / (z_ndc - 1.0);
+                        let (wo, wd) = (world.origins[i], world.directions[i]);
+                        Some(wo + wd * ((z - wo.z) / wd.z))
+                    }
+                }
+            })
+            .collect()
+    }
 }
 
 fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
@@ -63,6 +95,31 @@ fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
         .convert::<f32>()
         .try_into_vec::<f32>()
         .map_err(|e| anyhow::anyhow!("reading a render: {e:?}"))
+}
+
+/// Relative depth error and opacity agreement of two renders of one view: the median relative
+/// depth difference on pixels opaque in both, the fraction of pixels on the same side of 0.5
+/// opacity, and how many pixels were opaque in both.
+pub fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> (f64, f64, usize) {
+    let mut errors = Vec::new();
+    let mut agree = 0usize;
+    for i in 0..student.opacity.len() {
+        let (os, ot) = (student.opacity[i], teacher.opacity[i]);
+        if (os > 0.5) == (ot > 0.5) {
+            agree += 1;
+        }
+        if os > 0.5 && ot > 0.5 {
+            let (ds, dt) = (student.depth[i] / os, teacher.depth[i] / ot);
+            errors.push(((ds - dt).abs() / dt.abs().max(1e-6)) as f64);
+        }
+    }
+    errors.sort_by(f64::total_cmp);
+    let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
+    (
+        median,
+        agree as f64 / student.opacity.len().max(1) as f64,
+        errors.len(),
+    )
 }
 
 /// Renders `rays` (an image's rays, row major) in chunks of [`CHUNK`] with a fixed sampling

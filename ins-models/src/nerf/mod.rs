@@ -8,8 +8,10 @@
 //! - [`task`]: the losses of each phase, occupancy refresh, held-out evaluation.
 //! - [`run`]: pretraining, stylizing and loading run folders.
 //! - [`eval`]: whole-view renders and their PSNR / SSIM.
+//! - [`consistency`]: view consistency along a path, style and content distances per view.
 
 pub mod config;
+pub mod consistency;
 pub mod eval;
 pub mod model;
 pub mod render;
