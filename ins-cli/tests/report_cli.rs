@@ -161,7 +161,7 @@ fn consistency_eval_and_report_open_in_a_browser() {
     ]);
     assert_clean_failure(&o, "--frames 5");
 
-    let o = ok(cli(&[
+    let eval = [
         "eval",
         "consistency",
         "--run",
@@ -174,7 +174,8 @@ fn consistency_eval_and_report_open_in_a_browser() {
         "--quiet",
         "--backend",
         "flex",
-    ]));
+    ];
+    let o = ok(cli(&eval));
     let stdout = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<serde_json::Value> = stdout
         .lines()
@@ -182,9 +183,10 @@ fn consistency_eval_and_report_open_in_a_browser() {
         .collect();
     let sets: Vec<&str> = lines.iter().filter_map(|l| l["set"].as_str()).collect();
     assert_eq!(sets, ["stylized", "baseline2d", "pretrained"]);
-    let eval = st.join("consistency");
+    let eval_dir = st.join("consistency");
     let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(eval.join("summary.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(eval_dir.join("summary.json")).unwrap())
+            .unwrap();
     assert_eq!(summary["frames"], 10);
     // The pretrained frames compared with themselves are the floor: defined and small, and a
     // set compared against its own renders has zero content distance.
@@ -192,7 +194,7 @@ fn consistency_eval_and_report_open_in_a_browser() {
     assert!(floor["rmse_k1"].as_f64().unwrap() < 0.2, "{floor}");
     assert_eq!(floor["content_distance"].as_f64().unwrap(), 0.0);
     assert!(summary["baseline_over_stylized_k1"].as_f64().is_some());
-    let pairs = std::fs::read_to_string(eval.join("pairs.jsonl")).unwrap();
+    let pairs = std::fs::read_to_string(eval_dir.join("pairs.jsonl")).unwrap();
     // 3 sets × (9 pairs at k=1 + 3 at k=7).
     assert_eq!(pairs.lines().count(), 3 * (9 + 3));
     for f in [
@@ -203,24 +205,11 @@ fn consistency_eval_and_report_open_in_a_browser() {
         "depth_stylized.png",
         "views.jsonl",
     ] {
-        assert!(eval.join(f).is_file(), "{f} missing");
+        assert!(eval_dir.join(f).is_file(), "{f} missing");
     }
 
     // A rerun keeps the finished baseline frames.
-    let o = ok(cli(&[
-        "eval",
-        "consistency",
-        "--run",
-        s(&st),
-        "--frames",
-        "10",
-        "--baseline2d",
-        "--baseline-steps",
-        "3",
-        "--quiet",
-        "--backend",
-        "flex",
-    ]));
+    let o = ok(cli(&eval));
     assert!(stderr(&o).contains("exists, kept"), "{}", stderr(&o));
 
     let report = dir.path().join("report");
