@@ -23,7 +23,8 @@ use vgg_import::Vgg16Features;
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
-    /// Workloads: vgg, siren (default: all implemented).
+    /// Workloads: vgg, vgg-layers (per-convolution profile), siren, nerf-pretrain, nerf-stylize,
+    /// nerf-grid, hash-grid, hash-grid-reference (default: the first five of BENCHMARKS.md).
     workloads: Vec<String>,
     /// Backend.
     #[arg(long, default_value = "flex")]
@@ -47,6 +48,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
     for w in &workloads {
         let device = backend.device().autodiff();
         device.seed(42);
+        if w == "vgg-layers" {
+            crate::bench_vgg_layers::run(&device, &backend.to_string(), args.steps)?;
+            continue;
+        }
         let times = match w.as_str() {
             "vgg" => bench_vgg(&device, args.steps)?,
             "siren" => bench_siren(&device, args.steps)?,
@@ -56,7 +61,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "hash-grid" => bench_hash_grid(&device, args.steps, true)?,
             "hash-grid-reference" => bench_hash_grid(&device, args.steps, false)?,
             other => bail!(
-                "unknown workload {other:?} (known: vgg, siren, nerf-pretrain, nerf-stylize, nerf-grid, hash-grid, hash-grid-reference)"
+                "unknown workload {other:?} (known: vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, hash-grid, hash-grid-reference)"
             ),
         };
         let mut sorted = times.clone();

@@ -1348,47 +1348,4 @@ mod tests {
         assert!((m.volume() - 1.0 / 6.0).abs() < 1e-12);
         assert!((m.area() - (1.5 + 3f64.sqrt() / 2.0)).abs() < 1e-12);
     }
-
-    /// `cargo test --release -- --ignored --nocapture timing_256`
-    #[test]
-    #[ignore]
-    fn timing_256() {
-        let n = 256;
-        let values = sample(n, -1.0, 1.0, sphere);
-        let grid = Grid {
-            res: [n; 3],
-            min: [-1.0; 3],
-            max: [1.0; 3],
-            values: &values,
-        };
-        let _ = marching_cubes(&grid, 0.0); // warm-up
-        let runs = 5;
-        let mut best = f64::INFINITY;
-        let mut m = Mesh::default();
-        for _ in 0..runs {
-            let t = std::time::Instant::now();
-            m = marching_cubes(&grid, 0.0);
-            best = best.min(t.elapsed().as_secs_f64());
-        }
-        println!(
-            "256^3 sphere: {} vertices, {} triangles, best of {runs}: {:.1} ms",
-            m.vertices.len(),
-            m.triangles.len(),
-            best * 1e3
-        );
-        let empty = vec![1.0f32; n * n * n];
-        let t = std::time::Instant::now();
-        let e = marching_cubes(
-            &Grid {
-                values: &empty,
-                ..grid
-            },
-            0.0,
-        );
-        println!(
-            "256^3 empty field: {:.1} ms",
-            t.elapsed().as_secs_f64() * 1e3
-        );
-        assert!(e.triangles.is_empty());
-    }
 }

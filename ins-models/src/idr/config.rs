@@ -45,11 +45,13 @@ pub struct IdrRunConfig {
     #[arg(long, default_value_t = 0.6)]
     pub init_radius: f64,
     /// `grid` SDF: finest resolution of the hash encoding over the unit sphere's cube (finer
-    /// levels fit finer texture but leave the surface, and so its normals, noisier).
-    #[arg(long, default_value_t = 1024)]
+    /// levels fit finer texture but leave the surface, and so its normals, noisier). On scan37
+    /// (held-out masked PSNR after 3000 steps, colour width 128): 256 → 18.95 dB, 512 → 19.87.
+    #[arg(long, default_value_t = 512)]
     pub grid_max_resolution: u32,
-    /// Width of the colour network's hidden layers.
-    #[arg(long, default_value_t = 64)]
+    /// Width of the colour network's hidden layers (`grid` SDF). On scan37, 128 with a 512 grid
+    /// gave 19.87 dB held-out masked PSNR where 64 with a 1024 grid gave 18.23.
+    #[arg(long, default_value_t = 128)]
     pub color_width: usize,
     /// Weight of the mask loss (IDR: 100).
     #[arg(long, default_value_t = 100.0)]
