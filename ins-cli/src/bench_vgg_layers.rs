@@ -62,9 +62,18 @@ pub fn run(device: &Device, backend: &str, steps: usize) -> Result<()> {
                 } else {
                     (x.clone(), w.clone().require_grad())
                 };
-                let y = relu(conv2d(xx.clone(), ww.clone(), Some(b.clone()), opts.clone()));
+                let y = relu(conv2d(
+                    xx.clone(),
+                    ww.clone(),
+                    Some(b.clone()),
+                    opts.clone(),
+                ));
                 let grads = (y * up.clone()).sum().backward();
-                let g = if track_x { xx.grad(&grads) } else { ww.grad(&grads) };
+                let g = if track_x {
+                    xx.grad(&grads)
+                } else {
+                    ww.grad(&grads)
+                };
                 let _ = g.map(|g| g.sum().into_scalar::<f32>());
             })
         };
