@@ -10,7 +10,7 @@ use ins_core::data::images::list_images;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::LossWeights;
 use ins_core::train::TrainOptions;
-use ins_models::stylize2d::{Stylize2dSettings, stylize};
+use ins_models::stylize2d::{StyleGrams, Stylize2dSettings, stylize, stylize_with};
 use vgg_import::{Vgg, load_vgg};
 
 use crate::vgg_cmd::VggArgs;
@@ -192,6 +192,7 @@ pub fn stylize_frames(
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out_dir).map_err(|e| anyhow::anyhow!("{}: {e}", out_dir.display()))?;
     let mut written = Vec::with_capacity(frames.len());
+    let grams = StyleGrams::new(run.vgg, run.style, run.settings.style_size, run.device);
     for (i, frame) in frames.iter().enumerate() {
         let name = frame.file_stem().unwrap_or_default().to_string_lossy();
         let out = out_dir.join(format!("{name}.png"));
@@ -212,9 +213,9 @@ pub fn stylize_frames(
         let mut opts = TrainOptions::new(run_dir(&out));
         opts.checkpoint_every = 0;
         opts.quiet = run.quiet;
-        let (result, _) = stylize(
+        let (result, _) = stylize_with(
             &img,
-            run.style,
+            &grams,
             run.vgg.clone(),
             run.settings,
             opts,

@@ -81,21 +81,35 @@ pub struct Stylize2dTask {
     content: Tensor<4>,
 }
 
+/// The painting's Gram targets, on the autodiff device the optimisation runs on: computed once
+/// and shared by every frame of a per-frame run (a VGG pass over the painting per frame would
+/// cost as much as a step).
+#[derive(Clone)]
+pub struct StyleGrams {
+    grams: [Tensor<3>; 4],
+}
+
+impl StyleGrams {
+    /// Targets of `style`, fitted within `style_size` pixels, for optimisations on `device`.
+    pub fn new(vgg: &Vgg, style: &RgbImage, style_size: usize, device: &Device) -> Self {
+        let ad = device.clone().autodiff();
+        let grams = StyleTarget::stacked_from_images(
+            &vgg.to_device(&ad),
+            std::slice::from_ref(style),
+            style_size,
+            &ad,
+        );
+        Self { grams }
+    }
+}
+
 impl Stylize2dTask {
-    /// Targets of `content` and `style` through `vgg`, which lives on `device`.
-    pub fn new(
-        vgg: Vgg,
-        content: &RgbImage,
-        style: &RgbImage,
-        style_size: usize,
-        device: &Device,
-    ) -> Self {
-        let style =
-            StyleTarget::stacked_from_images(&vgg, std::slice::from_ref(style), style_size, device);
+    /// Targets of `content` through `vgg`, which lives on `device`, and the painting's `style`.
+    pub fn new(vgg: Vgg, content: &RgbImage, style: &StyleGrams, device: &Device) -> Self {
         let content = vgg.features(content.to_tensor(device)).relu2_2.detach();
         Self {
             vgg,
-            style,
+            style: style.grams.clone(),
             content,
         }
     }
@@ -131,8 +145,21 @@ pub fn stylize(
     opts: TrainOptions,
     device: &Device,
 ) -> Result<(RgbImage, TrainOutcome<Canvas>)> {
+    let grams = StyleGrams::new(&vgg, style, settings.style_size, device);
+    stylize_with(content, &grams, vgg, settings, opts, device)
+}
+
+/// [`stylize`] against Gram targets computed beforehand (`settings.style_size` is theirs).
+pub fn stylize_with(
+    content: &RgbImage,
+    style: &StyleGrams,
+    vgg: Vgg,
+    settings: &Stylize2dSettings,
+    opts: TrainOptions,
+    device: &Device,
+) -> Result<(RgbImage, TrainOutcome<Canvas>)> {
     let ad = device.clone().autodiff();
-    let mut task = Stylize2dTask::new(vgg.to_device(&ad), content, style, settings.style_size, &ad);
+    let mut task = Stylize2dTask::new(vgg.to_device(&ad), content, style, &ad);
     let phase = Phase::new(
         "stylize",
         Stylize2dObjective::Stylize,
