@@ -3,6 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
+use ins_core::data::SceneFormat;
 use ins_core::modules::field::CimKind;
 use serde::{Deserialize, Serialize};
 
@@ -27,7 +28,8 @@ pub struct NerfRunConfig {
     /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
     #[arg(long, default_value_t = 0)]
     pub downscale: u32,
-    /// Training steps (pretraining or stylization).
+    /// Training steps (0: pretraining 1000 with the grid, 4000 on forward-facing LLFF scenes,
+    /// 200000 with the mlp; stylizing 600 / 50000).
     #[arg(long, default_value_t = 0)]
     pub steps: usize,
     /// Adam learning rate (0: 1e-2 for grid, 5e-4 for mlp pretraining; 1e-3 / 1e-4 stylizing).
@@ -161,6 +163,16 @@ impl NerfRunConfig {
         }
     }
 
+    /// Steps to pretrain on a scene of `format`: forward-facing (LLFF) scenes get more, as their
+    /// held-out views keep improving long after a 360° scene's have settled (fern, grid: 21.9 dB
+    /// at 1000 steps, 24.1 at step 3000 of a 4000-step run).
+    pub fn pretrain_steps_for(&self, format: SceneFormat) -> usize {
+        match (self.steps, self.cim, format) {
+            (0, CimKind::Grid, SceneFormat::Llff) => 4000,
+            _ => self.steps_for(RunKind::Pretrain),
+        }
+    }
+
     /// Steps to run (the default depends on the kind and the content module).
     pub fn steps_for(&self, kind: RunKind) -> usize {
         if self.steps > 0 {
@@ -203,4 +215,33 @@ impl NerfRunConfig {
 pub fn auto_downscale(width: u32, height: u32, max_side: u32) -> u32 {
     let long = width.max(height).max(1);
     long.div_ceil(max_side.max(1)).max(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(steps: usize, cim: CimKind) -> NerfRunConfig {
+        NerfRunConfig {
+            steps,
+            cim,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn forward_facing_scenes_pretrain_longer_unless_steps_are_given() {
+        let grid = config(0, CimKind::Grid);
+        assert_eq!(grid.pretrain_steps_for(SceneFormat::Llff), 4000);
+        assert_eq!(grid.pretrain_steps_for(SceneFormat::Blender), 1000);
+        assert_eq!(grid.pretrain_steps_for(SceneFormat::Dtu), 1000);
+        assert_eq!(
+            config(0, CimKind::Mlp).pretrain_steps_for(SceneFormat::Llff),
+            200_000
+        );
+        assert_eq!(
+            config(250, CimKind::Grid).pretrain_steps_for(SceneFormat::Llff),
+            250
+        );
+    }
 }

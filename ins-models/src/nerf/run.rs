@@ -128,7 +128,7 @@ pub fn pretrain(
     let (scene, factor) = load_scene(&scene_path, cfg.downscale)?;
     let mut cfg = cfg.clone();
     cfg.downscale = factor;
-    cfg.steps = cfg.steps_for(RunKind::Pretrain);
+    cfg.steps = cfg.pretrain_steps_for(scene.format);
     cfg.lr = cfg.lr_for(RunKind::Pretrain);
     let out = opts.out_dir.clone();
     crate::config::write_run_config(&cfg, &out, opts.resume)?;
