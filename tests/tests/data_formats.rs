@@ -531,6 +531,40 @@ fn strided_patches_span_k_times_s_and_skip_background() {
 }
 
 #[test]
+fn patches_can_be_required_to_lie_mostly_on_the_object() {
+    let (dir, _) = write(SceneFormat::Blender, 48, 3);
+    let scene = load(dir.path());
+    let coverage = |p: &ins_core::render::patches::Patch| {
+        p.batch.mask.iter().filter(|&&m| m >= 0.5).count() as f32 / p.batch.len() as f32
+    };
+    let mut any = PatchSampler::new(4, 2, 3);
+    let mut most = PatchSampler::new(4, 2, 3).with_min_coverage(0.9);
+    let (mut plain_ok, mut ok) = (0, 0);
+    for _ in 0..200 {
+        plain_ok += (coverage(&any.sample(&scene, Split::Train).unwrap()) >= 0.9) as usize;
+        let p = most.sample(&scene, Split::Train).unwrap();
+        // Covered enough, or the best of all the redraws allowed.
+        assert!(
+            coverage(&p) >= 0.9 || p.redraws == most.max_redraws,
+            "coverage {} after {} redraws",
+            coverage(&p),
+            p.redraws
+        );
+        ok += (coverage(&p) >= 0.9) as usize;
+    }
+    eprintln!("covered ≥ 90 %: {ok} of 200 (plain sampler: {plain_ok})");
+    assert!(
+        ok > 2 * plain_ok && ok > 150,
+        "{ok} of 200 patches covered ≥ 90 % (plain sampler: {plain_ok})"
+    );
+    // Where no window is covered enough, the best of the draws comes back.
+    let mut impossible = PatchSampler::new(20, 2, 1).with_min_coverage(1.01);
+    let p = impossible.sample(&scene, Split::Train).unwrap();
+    assert_eq!(p.redraws, impossible.max_redraws);
+    assert!(coverage(&p) > 0.0);
+}
+
+#[test]
 fn random_ray_batches_carry_pixel_targets() {
     let (dir, _) = write(SceneFormat::Llff, 24, 9);
     let scene = load(dir.path());

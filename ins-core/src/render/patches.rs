@@ -103,14 +103,18 @@ pub struct Patch {
 
 /// Draws strided patches at random places of random views of a split.
 ///
-/// A patch whose every sample has mask < 0.5 is redrawn (scenes without masks never are), up to
-/// `max_redraws` times; after that the last draw is returned, with `redraws == max_redraws`.
+/// A patch with too little of the object is redrawn (scenes without masks never are): one
+/// whose every sample has mask < 0.5, or, with `min_coverage`, one where fewer than that
+/// fraction of samples lie inside the mask. Up to `max_redraws` times; after that the best
+/// draw so far is returned, with `redraws == max_redraws`.
 #[derive(Clone, Debug)]
 pub struct PatchSampler {
     /// Patch geometry.
     pub spec: PatchSpec,
-    /// Redraws allowed for all-background patches.
+    /// Redraws allowed for patches with too little of the object.
     pub max_redraws: usize,
+    /// Fraction of a patch's samples that must lie inside the mask (0: at least one).
+    pub min_coverage: f32,
     rng: SmallRng,
 }
 
@@ -121,8 +125,16 @@ impl PatchSampler {
         PatchSampler {
             spec: PatchSpec::new(size, stride),
             max_redraws: 100,
+            min_coverage: 0.0,
             rng: SmallRng::seed_from_u64(seed),
         }
+    }
+
+    /// Requires `fraction` of each patch's samples inside the mask (stylizing a masked object:
+    /// the background is not the model's to paint, and in a patch's Gram matrices it is noise).
+    pub fn with_min_coverage(mut self, fraction: f32) -> Self {
+        self.min_coverage = fraction;
+        self
     }
 
     /// Window side K·s in pixels.
@@ -141,6 +153,7 @@ impl PatchSampler {
             )));
         }
         let mut redraws = 0;
+        let mut best: Option<(f32, Patch)> = None;
         loop {
             let view = views[self.rng.random_range(0..views.len())];
             let cam = &scene.views[view].camera;
@@ -149,8 +162,17 @@ impl PatchSampler {
                 .random_origin(cam.width, cam.height, &mut self.rng)
                 .map_err(|e| DataError::Request(format!("view {view}: {e}")))?;
             let patch = self.patch_at(scene, view, x0, y0, redraws)?;
-            let background = patch.batch.mask.iter().all(|&m| m < 0.5);
-            if !background || redraws >= self.max_redraws {
+            let inside = patch.batch.mask.iter().filter(|&&m| m >= 0.5).count();
+            let coverage = inside as f32 / patch.batch.mask.len().max(1) as f32;
+            if (inside > 0 && coverage >= self.min_coverage) || patch.batch.mask.is_empty() {
+                return Ok(patch);
+            }
+            if best.as_ref().is_none_or(|(c, _)| coverage > *c) {
+                best = Some((coverage, patch));
+            }
+            if redraws >= self.max_redraws {
+                let (_, mut patch) = best.expect("at least one draw");
+                patch.redraws = redraws;
                 return Ok(patch);
             }
             redraws += 1;
