@@ -159,6 +159,20 @@ fn train_render_eval_export_and_refuse_bad_input() {
         s(&dir.path().join("y")),
     ]);
     assert_clean_failure(&o, "--no-mask");
+    // A hash grid finer than the encoding supports is refused before anything is written.
+    let too_fine = dir.path().join("too_fine");
+    let o = cli(&[
+        "train",
+        "idr",
+        "--scene",
+        s(&scene),
+        "--grid-max-resolution",
+        "5000",
+        "--out",
+        s(&too_fine),
+    ]);
+    assert_clean_failure(&o, "--grid-max-resolution 5000");
+    assert!(!too_fine.join("config.json").exists());
     let nerf_like = dir.path().join("nerf_like");
     std::fs::create_dir_all(&nerf_like).unwrap();
     std::fs::write(

@@ -38,7 +38,8 @@ pub struct IdrRunConfig {
     /// Rays per pretraining step.
     #[arg(long, default_value_t = 2048)]
     pub rays: usize,
-    /// Adam learning rate (0: 5e-3 grid / 1e-4 mlp pretraining, 1e-3 stylizing).
+    /// Adam learning rate (0: 5e-3 grid / 1e-4 mlp pretraining, 5e-3 grid / 1e-3 mlp
+    /// stylizing).
     #[arg(long, default_value_t = 0.0)]
     pub lr: f64,
     /// Radius of the initial sphere.
@@ -161,7 +162,10 @@ impl IdrRunConfig {
         match (kind, self.sdf) {
             (IdrKind::Pretrain, SdfKind::Grid) => 5e-3,
             (IdrKind::Pretrain, SdfKind::Mlp) => 1e-4,
-            (IdrKind::Stylize, _) => 1e-3,
+            // On scan37 at 1e-3 the style loss had barely moved after 200 steps; at 5e-3 it
+            // fell 4.6× over the 400 (1.7e6 to 3.7e5, the mean of the last 40).
+            (IdrKind::Stylize, SdfKind::Grid) => 5e-3,
+            (IdrKind::Stylize, SdfKind::Mlp) => 1e-3,
         }
     }
 }

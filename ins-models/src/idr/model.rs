@@ -73,7 +73,8 @@ const STYLIZED: &[GroupSpec] = &[
     GroupSpec::new("sdf", &["sdf"]),
     GroupSpec::new("color", &["color"]),
     GroupSpec::new("sim", &["stylizer.sim"]),
-    GroupSpec::new("am", &["stylizer.am"]),
+    GroupSpec::new("am", &["stylizer.am.layers"]),
+    GroupSpec::new("blend", &["stylizer.am.gamma"]),
 ];
 
 impl Optimizable for IdrModel {
@@ -97,6 +98,18 @@ pub struct IdrArch {
     pub grid_max_resolution: u32,
     /// Hidden width of the colour network (`grid`; the `mlp` SDF keeps IDR's).
     pub color_width: usize,
+}
+
+impl IdrArch {
+    /// Checks the grid's finest resolution against what the hash encoding supports (the
+    /// coarsest is 16).
+    pub fn validate(&self) -> Result<(), String> {
+        let res = self.grid_max_resolution;
+        if self.sdf == SdfKind::Grid && !(16..=2047).contains(&res) {
+            return Err(format!("--grid-max-resolution {res} is outside 16..=2047"));
+        }
+        Ok(())
+    }
 }
 
 impl IdrModel {

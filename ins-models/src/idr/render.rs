@@ -62,6 +62,8 @@ pub struct SurfaceRender {
     pub hits: Vec<usize>,
     /// The SDF gradient at the differentiable surface points `[H, 3]` (for eikonal terms).
     pub surface_gradients: Option<Tensor<2>>,
+    /// Wall time of the sphere tracing, in milliseconds (where a step's time goes).
+    pub trace_ms: f64,
 }
 
 fn tensor2(v: Vec<f32>, rows: usize, cols: usize, device: &Device) -> Tensor<2> {
@@ -81,7 +83,9 @@ pub fn render_surface(
     device: &Device,
 ) -> SurfaceRender {
     let r = rays.len();
+    let started = std::time::Instant::now();
     let traced = trace(model, rays, opts, device);
+    let trace_ms = started.elapsed().as_secs_f64() * 1e3;
     let hits: Vec<usize> = (0..r).filter(|&i| traced.hit[i]).collect();
     let s = codes.as_ref().map_or(1, |c| c.dims()[0]);
     let bg = Tensor::<1>::from_floats(background, device)
@@ -94,6 +98,7 @@ pub fn render_surface(
             traced,
             hits,
             surface_gradients: None,
+            trace_ms,
         };
     }
     let h = hits.len();
@@ -126,6 +131,7 @@ pub fn render_surface(
         traced,
         hits,
         surface_gradients: Some(normals),
+        trace_ms,
     }
 }
 

@@ -30,6 +30,11 @@ pub enum IdrObjective {
     Stylize,
 }
 
+/// Fraction of a stylization patch that must lie inside the mask: the black background is
+/// not the surface's to paint, and a patch that is half background has a Gram matrix no
+/// colour of the surface can bring to the painting's.
+pub const PATCH_COVERAGE: f32 = 0.9;
+
 /// What stylization needs.
 pub struct SurfaceStylization {
     /// Frozen VGG-16.
@@ -139,7 +144,8 @@ impl IdrTask {
             .term("rgb", rgb_loss)
             .term("mse_mask", mse_in)
             .metric_of("psnr_mask", "mse_mask", psnr)
-            .metric("hit_rate", out.hits.len() as f64 / r as f64);
+            .metric("hit_rate", out.hits.len() as f64 / r as f64)
+            .metric("trace_ms", out.trace_ms);
         // Mask: soft occupancy at the surface point (hits outside the mask) or at the point of
         // smallest SDF (misses), BCE against the mask, scaled by 1/α.
         if self.masked {
@@ -193,7 +199,8 @@ impl IdrTask {
             .style
             .as_ref()
             .context("a stylization phase without styles")?;
-        let mut sampler = PatchSampler::new(style.patch.size, style.patch.stride, seed);
+        let mut sampler = PatchSampler::new(style.patch.size, style.patch.stride, seed)
+            .with_min_coverage(PATCH_COVERAGE);
         let patch = sampler.sample(&self.scene, Split::Train)?;
         let k = style.patch.size as usize;
         let out = render_surface(
@@ -228,7 +235,8 @@ impl IdrTask {
         Ok(LossTerms::default()
             .term("style", style_loss(&feats, &style.targets))
             .term("content", content_loss(&feats, &content_target))
-            .metric("hit_rate", out.hits.len() as f64 / (k * k) as f64))
+            .metric("hit_rate", out.hits.len() as f64 / (k * k) as f64)
+            .metric("trace_ms", out.trace_ms))
     }
 }
 
