@@ -164,7 +164,7 @@ impl PatchSampler {
             let patch = self.patch_at(scene, view, x0, y0, redraws)?;
             let inside = patch.batch.mask.iter().filter(|&&m| m >= 0.5).count();
             let coverage = inside as f32 / patch.batch.mask.len().max(1) as f32;
-            if (inside > 0 && coverage >= self.min_coverage) || patch.batch.mask.is_empty() {
+            if inside > 0 && coverage >= self.min_coverage {
                 return Ok(patch);
             }
             if best.as_ref().is_none_or(|(c, _)| coverage > *c) {

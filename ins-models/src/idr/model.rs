@@ -101,14 +101,22 @@ pub struct IdrArch {
 }
 
 impl IdrArch {
-    /// Checks the grid's finest resolution against what the hash encoding supports (the
-    /// coarsest is 16).
+    /// The `grid` SDF's hash encoding.
+    fn hash_grid(&self) -> HashGridConfig {
+        HashGridConfig::new()
+            .with_log2_table(17)
+            .with_base_resolution(16)
+            .with_max_resolution(self.grid_max_resolution)
+    }
+
+    /// Checks the `grid` SDF's encoding against what the hash grid supports.
     pub fn validate(&self) -> Result<(), String> {
-        let res = self.grid_max_resolution;
-        if self.sdf == SdfKind::Grid && !(16..=2047).contains(&res) {
-            return Err(format!("--grid-max-resolution {res} is outside 16..=2047"));
+        match self.sdf {
+            SdfKind::Grid => self.hash_grid().validate().map_err(|e| {
+                format!("--grid-max-resolution {}: {e}", self.grid_max_resolution)
+            }),
+            SdfKind::Mlp => Ok(()),
         }
-        Ok(())
     }
 }
 
@@ -123,12 +131,8 @@ impl IdrModel {
                 (net, c)
             }
             SdfKind::Grid => {
-                let grid = HashGridConfig::new()
-                    .with_log2_table(17)
-                    .with_base_resolution(16)
-                    .with_max_resolution(arch.grid_max_resolution);
                 let net = SdfNet::Grid(
-                    SdfGridConfig::new(grid)
+                    SdfGridConfig::new(arch.hash_grid())
                         .with_radius(arch.radius)
                         .init(1.0, device),
                 );
