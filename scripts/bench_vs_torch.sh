@@ -3,8 +3,10 @@
 # each workload of BENCHMARKS.md runs the PyTorch reference and `ins-cli bench` back to back,
 # with the same thread count, and prints the ratios (below 1: INS-rs is faster).
 #
-#   scripts/bench_vs_torch.sh [--steps N] [--threads T] [WORKLOAD ...]
+#   scripts/bench_vs_torch.sh [--steps N] [--threads T] [--precision f32|bf16] [WORKLOAD ...]
 #
+# --precision is INS-rs's VGG arithmetic (bf16: AMX tiles where the CPU has them); PyTorch stays
+# in f32, as a user would run it.
 # Workloads: vgg siren nerf-pretrain nerf-stylize (default: all four). The reference program is
 # ../shared/bench/torch_ref.py (override with INS_TORCH_REF); the venv is .venv-torch (override
 # with INS_TORCH_VENV). Results also go to bench_vs_torch.jsonl.
@@ -13,12 +15,14 @@ cd "$(dirname "$0")/.."
 
 steps=3
 threads=2
+precision=f32
 workloads=()
 while (($#)); do
   case "$1" in
     --steps) steps="$2"; shift 2 ;;
     --threads) threads="$2"; shift 2 ;;
-    -h|--help) sed -n 2,10p "$0"; exit 0 ;;
+    --precision) precision="$2"; shift 2 ;;
+    -h|--help) sed -n 2,13p "$0"; exit 0 ;;
     *) workloads+=("$1"); shift ;;
   esac
 done
@@ -43,7 +47,8 @@ for w in "${workloads[@]}"; do
   echo "== $w: PyTorch, then INS-rs ($steps steps each after a warm-up)" >&2
   OMP_NUM_THREADS="$threads" "$venv/bin/python" "$ref" --threads "$threads" --steps "$steps" "$w" \
     | grep '^{' >> "$out"
-  RAYON_NUM_THREADS="$threads" "$cli" bench "$w" --steps "$steps" | grep '^{' >> "$out"
+  RAYON_NUM_THREADS="$threads" "$cli" bench "$w" --steps "$steps" --precision "$precision" \
+    | grep '^{' >> "$out"
 done
 
 python3 - "$out" <<'EOF'
@@ -51,9 +56,9 @@ import json, sys
 rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
 torch = {r["workload"]: r for r in rows if str(r.get("engine", "")).startswith("pytorch")}
 ours = {r["workload"]: r for r in rows if "backend" in r}
-print(f"{'workload':<14}{'PyTorch ms':>12}{'INS-rs ms':>12}{'ratio':>8}")
+print(f"{'workload':<14}{'PyTorch ms':>12}{'INS-rs ms':>12}{'ratio':>8}  INS-rs precision")
 for w, t in torch.items():
     if w in ours:
         a, b = t["ms_per_step"], ours[w]["ms_per_step"]
-        print(f"{w:<14}{a:>12.0f}{b:>12.0f}{b / a:>8.2f}")
+        print(f"{w:<14}{a:>12.0f}{b:>12.0f}{b / a:>8.2f}  {ours[w].get('precision', 'f32')}")
 EOF

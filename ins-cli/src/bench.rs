@@ -7,6 +7,7 @@ use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 use clap::Args;
+use ins_conv::Precision;
 use ins_core::backend::BackendChoice;
 use ins_core::data::plain_image::pixel_coordinates;
 use ins_core::loss::{StyleTarget, content_loss, mse, style_loss};
@@ -32,6 +33,9 @@ pub struct BenchArgs {
     /// Timed steps (after one warm-up step); the median is reported.
     #[arg(long, default_value_t = 5)]
     steps: usize,
+    /// Arithmetic of the VGG convolutions: f32, or bf16 (AMX; f32 where the CPU lacks it).
+    #[arg(long, default_value = "f32")]
+    precision: Precision,
 }
 
 const STYLE_WEIGHT: f64 = 1e8;
@@ -53,10 +57,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
             continue;
         }
         let times = match w.as_str() {
-            "vgg" => bench_vgg(&device, args.steps)?,
-            "siren" => bench_siren(&device, args.steps)?,
+            "vgg" => bench_vgg(&device, args.steps, args.precision)?,
+            "siren" => bench_siren(&device, args.steps, args.precision)?,
             "nerf-pretrain" => bench_nerf_pretrain(&device, args.steps)?,
-            "nerf-stylize" => bench_nerf_stylize(&device, args.steps)?,
+            "nerf-stylize" => bench_nerf_stylize(&device, args.steps, args.precision)?,
             "nerf-grid" => bench_nerf_grid(&device, args.steps)?,
             "hash-grid" => bench_hash_grid(&device, args.steps, true)?,
             "hash-grid-reference" => bench_hash_grid(&device, args.steps, false)?,
@@ -76,6 +80,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "max_ms": (sorted[sorted.len() - 1] * 10.0).round() / 10.0,
             "peak_rss_mb": peak_rss_mb(),
         });
+        if matches!(w.as_str(), "vgg" | "siren" | "nerf-stylize") {
+            line["precision"] = args.precision.effective().to_string().into();
+        }
         if let Some(rays) = rays_per_step(w) {
             line["rays_per_s"] = ((rays as f64 / median * 1e3).round()).into();
         }
@@ -113,8 +120,8 @@ fn timed(steps: usize, mut step: impl FnMut() -> Result<()>) -> Result<Vec<f64>>
     Ok(times)
 }
 
-fn bench_vgg(device: &Device, steps: usize) -> Result<Vec<f64>> {
-    let vgg = Vgg16Features::random(device);
+fn bench_vgg(device: &Device, steps: usize, precision: Precision) -> Result<Vec<f64>> {
+    let vgg = Vgg16Features::random(device).with_precision(precision);
     let target_img = Tensor::<4>::random([1, 3, 256, 256], Distribution::Uniform(0.0, 1.0), device);
     let tf = vgg.forward(target_img);
     let targets = StyleTarget::from_features(&tf).grams;
@@ -133,8 +140,8 @@ fn bench_vgg(device: &Device, steps: usize) -> Result<Vec<f64>> {
     })
 }
 
-fn bench_siren(device: &Device, steps: usize) -> Result<Vec<f64>> {
-    let vgg = Vgg16Features::random(device);
+fn bench_siren(device: &Device, steps: usize, precision: Precision) -> Result<Vec<f64>> {
+    let vgg = Vgg16Features::random(device).with_precision(precision);
     let side = 128;
     let target_img =
         Tensor::<4>::random([1, 3, side, side], Distribution::Uniform(0.0, 1.0), device);
@@ -245,8 +252,8 @@ fn bench_nerf_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
     })
 }
 
-fn bench_nerf_stylize(device: &Device, steps: usize) -> Result<Vec<f64>> {
-    let vgg = Vgg16Features::random(device);
+fn bench_nerf_stylize(device: &Device, steps: usize, precision: Precision) -> Result<Vec<f64>> {
+    let vgg = Vgg16Features::random(device).with_precision(precision);
     let tf = vgg.forward(Tensor::<4>::random(
         [1, 3, 256, 256],
         Distribution::Uniform(0.0, 1.0),

@@ -14,7 +14,6 @@ use ins_models::nerf::consistency::{
 };
 use ins_models::stylize2d::Stylize2dSettings;
 use serde_json::json;
-use vgg_import::load_vgg;
 
 use crate::siren_cmd::parse_size;
 use crate::stylize2d_cmd::{FrameRun, stylize_frames};
@@ -143,7 +142,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
     let mut mix = vec![0.0f32; styles.len()];
     mix[a.style] = 1.0;
     let code = student.code(Some(&mix), &device)?;
-    let vgg = load_vgg(&a.vgg.source(), &device)?;
+    let vgg = a.vgg.load(&device)?;
     let out = a.out.clone().unwrap_or_else(|| a.run.join("consistency"));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
 

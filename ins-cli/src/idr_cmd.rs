@@ -15,7 +15,6 @@ use ins_models::idr::config::IdrKind;
 use ins_models::idr::eval::{evaluate_views, render_camera};
 use ins_models::idr::mesh::extract_mesh;
 use ins_models::idr::{IdrRun, IdrRunConfig};
-use vgg_import::load_vgg;
 
 use crate::siren_cmd::{RunArgs, parse_size};
 use crate::vgg_cmd::VggArgs;
@@ -50,7 +49,7 @@ pub fn train(a: TrainIdr, matches: &ArgMatches) -> Result<()> {
             ins_models::idr::pretrain(&cfg, &device, opts)?
         }
         IdrKind::Stylize => {
-            let vgg = load_vgg(&a.vgg.source(), &device)?;
+            let vgg = a.vgg.load(&device)?;
             eprintln!(
                 "stylizing a surface with {} style(s) on {backend} into {}",
                 cfg.styles.len(),

@@ -14,7 +14,6 @@ use ins_models::config::merge_with_file;
 use ins_models::nerf::config::RunKind;
 use ins_models::nerf::eval::{ViewRender, depth_agreement, evaluate_views, render_camera};
 use ins_models::nerf::{NerfRun, NerfRunConfig};
-use vgg_import::load_vgg;
 
 use crate::siren_cmd::{RunArgs, parse_size};
 use crate::vgg_cmd::VggArgs;
@@ -52,7 +51,7 @@ pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
             ins_models::nerf::pretrain(&cfg, &device, opts)?
         }
         RunKind::Stylize => {
-            let vgg = load_vgg(&a.vgg.source(), &device)?;
+            let vgg = a.vgg.load(&device)?;
             eprintln!(
                 "stylizing {} with {} style{} on {backend} into {}",
                 cfg.from

@@ -8,7 +8,6 @@ use ins_core::backend::BackendChoice;
 use ins_core::train::TrainOptions;
 use ins_models::config::merge_with_file;
 use ins_models::siren::{SirenRun, SirenRunConfig};
-use vgg_import::load_vgg;
 
 use crate::vgg_cmd::VggArgs;
 
@@ -126,7 +125,7 @@ pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
     }
     let backend = a.run.backend.resolve();
     let device = backend.device();
-    let vgg = load_vgg(&a.vgg.source(), &device)?;
+    let vgg = a.vgg.load(&device)?;
     eprintln!(
         "training SIREN+INS on {backend} ({} style{}, VGG preprocessing {}) into {}",
         cfg.styles.len(),

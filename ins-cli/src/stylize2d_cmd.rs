@@ -11,7 +11,7 @@ use ins_core::imaging::RgbImage;
 use ins_core::loss::LossWeights;
 use ins_core::train::TrainOptions;
 use ins_models::stylize2d::{StyleGrams, Stylize2dSettings, stylize, stylize_with};
-use vgg_import::{Vgg, load_vgg};
+use vgg_import::Vgg;
 
 use crate::vgg_cmd::VggArgs;
 
@@ -111,7 +111,7 @@ pub fn run(a: Stylize2d) -> Result<()> {
     let style = RgbImage::load(&a.style)?;
     let backend = a.backend.resolve();
     let device = backend.device();
-    let vgg = load_vgg(&a.vgg.source(), &device)?;
+    let vgg = a.vgg.load(&device)?;
     let settings = a.settings(&vgg);
     let options = |out: &Path, resume: bool, checkpoint_every: usize| {
         let mut o = TrainOptions::new(run_dir(out));

@@ -3,11 +3,13 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+use burn::prelude::Device;
 use clap::{Args, Subcommand};
+use ins_conv::Precision;
 use ins_core::backend::BackendChoice;
 use ins_core::imaging::RgbImage;
 use vgg_import::source::{cache_dir, fetch_default, resolve_onnx};
-use vgg_import::{Preprocess, VggSource, load_vgg};
+use vgg_import::{Preprocess, Vgg, VggSource, load_vgg};
 
 /// Where VGG weights come from; shared by every command that needs them.
 #[derive(Args, Debug, Clone)]
@@ -21,9 +23,28 @@ pub struct VggArgs {
     /// Cache folder (default: $INS_CACHE_DIR, else ~/.cache/ins-rs).
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
+    /// Arithmetic of the VGG convolutions: f32, or bf16 (BF16 products with f32 sums on Intel
+    /// AMX; falls back to f32 on CPUs without it).
+    #[arg(long, value_name = "P", default_value = "f32")]
+    pub precision: Precision,
 }
 
 impl VggArgs {
+    /// Loads the VGG these arguments describe, at the asked precision (saying so when BF16 was
+    /// asked for and this CPU cannot run it).
+    pub fn load(&self, device: &Device) -> anyhow::Result<Vgg> {
+        let vgg = load_vgg(&self.source(), device)?;
+        match (self.precision, self.precision.effective()) {
+            (Precision::Bf16, Precision::F32) => eprintln!(
+                "--precision bf16: this CPU (or {}) offers no AMX-BF16; VGG runs in f32",
+                ins_conv::amx::DISABLE_ENV
+            ),
+            (Precision::Bf16, Precision::Bf16) => eprintln!("VGG convolutions in bf16 on AMX"),
+            _ => {}
+        }
+        Ok(vgg.with_precision(self.precision))
+    }
+
     /// The source description, fetching the default weights if needed.
     pub fn source(&self) -> VggSource {
         VggSource {
@@ -101,7 +122,7 @@ pub fn run(cmd: VggCommand) -> Result<()> {
             backend,
         } => {
             let device = backend.device();
-            let model = load_vgg(&vgg.source(), &device)?;
+            let model = vgg.load(&device)?;
             let img = RgbImage::load(&image)?;
             let f = model.features(img.to_tensor(&device));
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;

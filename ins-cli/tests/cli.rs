@@ -285,3 +285,61 @@ fn two_styles_train_and_render_a_mix_and_a_strip() {
     ]);
     assert_clean_failure(&o, "non-negative");
 }
+
+/// `--precision bf16` runs VGG on AMX where the CPU has it (features close to f32's, not
+/// equal), and with AMX forced off (`INS_DISABLE_AMX=1`, as on a CPU without it) says so and
+/// gives exactly the f32 features.
+#[test]
+fn bf16_precision_runs_on_amx_or_falls_back_to_f32() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = dir.path().join("img.png");
+    image::RgbImage::from_fn(48, 40, |x, y| {
+        image::Rgb([(x * 5) as u8, (y * 6) as u8, ((x * y) % 255) as u8])
+    })
+    .save(&img)
+    .unwrap();
+    let features = |precision: &str, amx_off: bool| {
+        let out = dir.path().join(format!("{precision}_{amx_off}"));
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_ins-cli"));
+        c.args(["vgg", "features", "--image", s(&img), "--out", s(&out)])
+            .args(["--backend", "flex", "--precision", precision])
+            .env("INS_NO_GPU", "1");
+        if amx_off {
+            c.env(ins_conv::amx::DISABLE_ENV, "1");
+        }
+        let o = ok(c.output().expect("running ins-cli"));
+        let layer = std::fs::read(out.join("relu4_3.npy")).unwrap();
+        (layer, stderr(&o))
+    };
+    let (f32_layer, _) = features("f32", false);
+    let (off_layer, off_msg) = features("bf16", true);
+    assert!(off_msg.contains("VGG runs in f32"), "{off_msg}");
+    assert_eq!(off_layer, f32_layer, "the fallback is not f32");
+    let (bf16_layer, msg) = features("bf16", false);
+    if ins_conv::Precision::Bf16.effective() == ins_conv::Precision::Bf16 {
+        assert!(msg.contains("bf16 on AMX"), "{msg}");
+        assert_ne!(bf16_layer, f32_layer, "bf16 gave f32's exact features");
+        let read = |b: &[u8]| -> Vec<f32> {
+            // .npy v1: magic (6), version (2), header length (u16 LE), header, data.
+            let data = 10 + u16::from_le_bytes([b[8], b[9]]) as usize;
+            b[data..]
+                .chunks(4)
+                .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+                .collect()
+        };
+        let (a, b) = (read(&bf16_layer), read(&f32_layer));
+        let scale = b.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max)
+            / scale;
+        assert!(
+            worst < 2e-2,
+            "bf16 relu4_3 off by {worst} of its largest value"
+        );
+    } else {
+        assert_eq!(bf16_layer, f32_layer);
+    }
+}

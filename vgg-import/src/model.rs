@@ -6,6 +6,9 @@ use burn::tensor::activation::relu;
 use burn::tensor::module::{conv2d, max_pool2d};
 use burn::tensor::ops::{ConvOptions, MaxPoolOptions};
 
+use ins_conv::op::ConvParams;
+use ins_conv::{Engine, Precision};
+
 use crate::onnx::{VGG16_CHANNELS, VggWeights};
 use crate::preprocess::Preprocess;
 
@@ -23,6 +26,9 @@ pub struct VggConv {
 pub struct Vgg16Features {
     /// Convolutions in layer order.
     pub convs: Vec<VggConv>,
+    /// The arithmetic of the convolutions (not part of the weights).
+    #[module(skip)]
+    pub precision: Precision,
 }
 
 /// The activations the losses use.
@@ -61,7 +67,10 @@ impl Vgg16Features {
                 }
             })
             .collect();
-        Self { convs }
+        Self {
+            convs,
+            precision: Precision::F32,
+        }
     }
 
     /// The module holding `weights`, frozen (gradients still flow to the input).
@@ -74,15 +83,46 @@ impl Vgg16Features {
                 bias: Param::from_tensor(Tensor::from_data(b.clone(), device)),
             })
             .collect();
-        Self { convs }.no_grad()
+        Self {
+            convs,
+            precision: Precision::F32,
+        }
+        .no_grad()
+    }
+
+    /// The same network computing its convolutions at `precision`.
+    pub fn with_precision(mut self, precision: Precision) -> Self {
+        self.precision = precision;
+        self
+    }
+
+    /// The AMX engine when BF16 is asked for and can run on `device`; `None` means Burn's own
+    /// f32 convolution.
+    fn bf16_engine(&self, device: &Device) -> Option<Engine> {
+        (self.precision == Precision::Bf16
+            && ins_conv::amx::available()
+            && ins_conv::kernel_device(device))
+        .then_some(Engine::Bf16Amx)
     }
 
     /// Runs a preprocessed `[B, 3, H, W]` batch to relu4_3.
     pub fn forward(&self, x: Tensor<4>) -> VggFeatures {
         let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+        let engine = self.bf16_engine(&x.device());
         let conv = |i: usize, x: Tensor<4>| {
             let c = &self.convs[i];
-            relu(conv2d(x, c.weight.val(), Some(c.bias.val()), opts.clone()))
+            let (w, b) = (c.weight.val(), Some(c.bias.val()));
+            relu(match engine {
+                Some(engine) => {
+                    let params = ConvParams {
+                        stride: [1, 1],
+                        padding: [1, 1],
+                        engine,
+                    };
+                    ins_conv::conv2d(x, w, b, params)
+                }
+                None => conv2d(x, w, b, opts.clone()),
+            })
         };
         let pool = |x: Tensor<4>| max_pool2d(x, MaxPoolOptions::new([2, 2]).with_stride([2, 2]));
         let x = conv(0, x);
@@ -119,6 +159,14 @@ impl Vgg {
         self.net.forward(self.preprocess.apply(rgb))
     }
 
+    /// The same extractor computing its convolutions at `precision`.
+    pub fn with_precision(self, precision: Precision) -> Self {
+        Self {
+            net: self.net.with_precision(precision),
+            preprocess: self.preprocess,
+        }
+    }
+
     /// The same extractor on another device.
     pub fn to_device(&self, device: &Device) -> Self {
         Self {
@@ -148,7 +196,11 @@ impl Vgg16Features {
                 }
             })
             .collect();
-        Self { convs }.no_grad()
+        Self {
+            convs,
+            precision: Precision::F32,
+        }
+        .no_grad()
     }
 }
 

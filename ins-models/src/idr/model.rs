@@ -112,9 +112,10 @@ impl IdrArch {
     /// Checks the `grid` SDF's encoding against what the hash grid supports.
     pub fn validate(&self) -> Result<(), String> {
         match self.sdf {
-            SdfKind::Grid => self.hash_grid().validate().map_err(|e| {
-                format!("--grid-max-resolution {}: {e}", self.grid_max_resolution)
-            }),
+            SdfKind::Grid => self
+                .hash_grid()
+                .validate()
+                .map_err(|e| format!("--grid-max-resolution {}: {e}", self.grid_max_resolution)),
             SdfKind::Mlp => Ok(()),
         }
     }

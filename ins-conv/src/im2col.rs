@@ -1,0 +1,54 @@
+//! im2col: the input values each output pixel's kernel window reads, laid out as the right-hand
+//! matrix of a GEMM (`[taps, pixels]`), one chunk of pixels at a time so the matrix never holds a
+//! whole image (conv1_2 at 256² would be 150 MB).
+
+use crate::geometry::Gather;
+
+/// Fills `cols` (`[channels·kh·kw, n]`, row-major) for output pixels `p0 .. p0 + n` of one image
+/// `src` (`[channels, h, w]`), reading through `gather`; taps outside the source are zeros.
+#[allow(clippy::too_many_arguments)]
+pub fn im2col(
+    src: &[f32],
+    channels: usize,
+    src_hw: [usize; 2],
+    kernel: [usize; 2],
+    gather: [Gather; 2],
+    out_w: usize,
+    p0: usize,
+    n: usize,
+    cols: &mut [f32],
+) {
+    let [kh, kw] = kernel;
+    let [h, w] = src_hw;
+    debug_assert_eq!(cols.len(), channels * kh * kw * n);
+    let mut row = 0;
+    for c in 0..channels {
+        let plane = &src[c * h * w..(c + 1) * h * w];
+        for ky in 0..kh {
+            for kx in 0..kw {
+                let dst = &mut cols[row * n..(row + 1) * n];
+                let mut p = p0;
+                let mut i = 0;
+                while i < n {
+                    let (oy, ox0) = (p / out_w, p % out_w);
+                    let run = (out_w - ox0).min(n - i);
+                    match gather[0].source(oy, ky) {
+                        None => dst[i..i + run].fill(0.0),
+                        Some(iy) => {
+                            let line = &plane[iy * w..(iy + 1) * w];
+                            for (j, d) in dst[i..i + run].iter_mut().enumerate() {
+                                *d = match gather[1].source(ox0 + j, kx) {
+                                    Some(ix) => line[ix],
+                                    None => 0.0,
+                                };
+                            }
+                        }
+                    }
+                    i += run;
+                    p += run;
+                }
+                row += 1;
+            }
+        }
+    }
+}
