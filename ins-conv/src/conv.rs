@@ -157,7 +157,14 @@ fn conv_gemm(
                             // SAFETY: rows r0 .. r0 + 32 < m, columns c0 .. c0 + 32 ≤ n.
                             unsafe {
                                 let c = out_at(r0, c0);
-                                tiles.block_32x32(rows, cols_b, kblocks, [&init[0], &init[1]], c, pixels)
+                                tiles.block_32x32(
+                                    rows,
+                                    cols_b,
+                                    kblocks,
+                                    [&init[0], &init[1]],
+                                    c,
+                                    pixels,
+                                )
                             };
                             continue;
                         }
@@ -165,7 +172,14 @@ fn conv_gemm(
                         // SAFETY: `block` holds 32 rows of 32.
                         unsafe {
                             let c = block.as_mut_ptr();
-                            tiles.block_32x32(rows, cols_b, kblocks, [&init[0], &init[1]], c, 2 * TILE)
+                            tiles.block_32x32(
+                                rows,
+                                cols_b,
+                                kblocks,
+                                [&init[0], &init[1]],
+                                c,
+                                2 * TILE,
+                            )
                         };
                         for r in 0..(2 * TILE).min(m.saturating_sub(r0)) {
                             let w = (2 * TILE).min(n - c0);
