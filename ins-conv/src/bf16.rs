@@ -2,15 +2,16 @@
 //! matrix in the VNNI layout (pairs of consecutive `k` side by side), both zero-padded to whole
 //! tiles.
 
+use rayon::prelude::*;
+
 /// f32 → bf16 with round-to-nearest-even (NaN stays NaN).
 #[inline]
 pub fn to_bf16(x: f32) -> u16 {
+    // Branch-free, so loops of it vectorize.
     let bits = x.to_bits();
-    if x.is_nan() {
-        return ((bits >> 16) | 0x40) as u16;
-    }
-    let round = 0x7FFF + ((bits >> 16) & 1);
-    (bits.wrapping_add(round) >> 16) as u16
+    let rounded = bits.wrapping_add(0x7FFF + ((bits >> 16) & 1)) >> 16;
+    let quiet_nan = (bits >> 16) | 0x40;
+    (if x.is_nan() { quiet_nan } else { rounded }) as u16
 }
 
 /// bf16 → f32 (exact).
@@ -45,14 +46,16 @@ impl PackedLeft {
     pub fn new(a: &[f32], m: usize, k: usize) -> Self {
         let (mp, kp) = (round_up(m, 2 * TILE), round_up(k, TILE_K));
         let mut data = vec![0u16; mp * kp];
-        let kblocks = kp / TILE_K;
-        for r in 0..m {
-            let (mb, rr) = (r / TILE, r % TILE);
-            for (kb, src) in a[r * k..(r + 1) * k].chunks(TILE_K).enumerate() {
-                let dst = &mut data[((mb * kblocks + kb) * TILE + rr) * TILE_K..][..src.len()];
-                dst.iter_mut().zip(src).for_each(|(d, &v)| *d = to_bf16(v));
+        // One row block of 16 per job.
+        data.par_chunks_mut(kp * TILE).enumerate().for_each(|(mb, block)| {
+            for rr in 0..TILE.min(m.saturating_sub(mb * TILE)) {
+                let r = mb * TILE + rr;
+                for (kb, src) in a[r * k..(r + 1) * k].chunks(TILE_K).enumerate() {
+                    let dst = &mut block[(kb * TILE + rr) * TILE_K..][..src.len()];
+                    dst.iter_mut().zip(src).for_each(|(d, &v)| *d = to_bf16(v));
+                }
             }
-        }
+        });
         Self { m: mp, k: kp, data }
     }
 
