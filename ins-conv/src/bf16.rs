@@ -47,15 +47,17 @@ impl PackedLeft {
         let (mp, kp) = (round_up(m, 2 * TILE), round_up(k, TILE_K));
         let mut data = vec![0u16; mp * kp];
         // One row block of 16 per job.
-        data.par_chunks_mut(kp * TILE).enumerate().for_each(|(mb, block)| {
-            for rr in 0..TILE.min(m.saturating_sub(mb * TILE)) {
-                let r = mb * TILE + rr;
-                for (kb, src) in a[r * k..(r + 1) * k].chunks(TILE_K).enumerate() {
-                    let dst = &mut block[(kb * TILE + rr) * TILE_K..][..src.len()];
-                    dst.iter_mut().zip(src).for_each(|(d, &v)| *d = to_bf16(v));
+        data.par_chunks_mut(kp * TILE)
+            .enumerate()
+            .for_each(|(mb, block)| {
+                for rr in 0..TILE.min(m.saturating_sub(mb * TILE)) {
+                    let r = mb * TILE + rr;
+                    for (kb, src) in a[r * k..(r + 1) * k].chunks(TILE_K).enumerate() {
+                        let dst = &mut block[(kb * TILE + rr) * TILE_K..][..src.len()];
+                        dst.iter_mut().zip(src).for_each(|(d, &v)| *d = to_bf16(v));
+                    }
                 }
-            }
-        });
+            });
         Self { m: mp, k: kp, data }
     }
 

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use crate::amx::{self, Tiles};
 use crate::bf16::{PackedLeft, TILE, TILE_K, pack_right, round_up};
 use crate::geometry::{ConvGeometry, Gather};
-use crate::im2col::im2col;
+use crate::im2col::{ImageSource, im2col};
 use crate::vnni_im2col::{UnitGather, im2col_vnni};
 
 /// The matrix-product engine.
@@ -64,18 +64,18 @@ unsafe impl Sync for Shared {}
 /// `cols_b` is im2col of image `b` of `src` (`[batch, channels, h, w]`) through `gather`.
 #[allow(clippy::too_many_arguments)]
 fn conv_gemm(
-    src: &[f32],
+    src: ImageSource,
     batch: usize,
-    channels: usize,
-    src_hw: [usize; 2],
     kernel: [usize; 2],
     gather: [Gather; 2],
     out_hw: [usize; 2],
     left: &[f32],
     m: usize,
     bias: Option<&[f32]>,
+    relu: bool,
     engine: Engine,
 ) -> Vec<f32> {
+    let (channels, src_hw) = (src.channels, src.hw);
     let k = channels * kernel[0] * kernel[1];
     let pixels = out_hw[0] * out_hw[1];
     let chunk = (CHUNK_BYTES / (4 * k)).max(1);
@@ -89,16 +89,18 @@ fn conv_gemm(
         let dst = dst;
         let p0 = c * chunk;
         let n = chunk.min(pixels - p0);
-        let src = &src[b * image..(b + 1) * image];
+        let src = ImageSource {
+            values: &src.values[b * image..(b + 1) * image],
+            gate: src.gate.map(|g| &g[b * image..(b + 1) * image]),
+            ..src
+        };
         // SAFETY: rows `m` of image `b`, columns `p0 .. p0 + n`: this job's alone.
         let out_at =
             |row: usize, col: usize| unsafe { dst.0.add((b * m + row) * pixels + p0 + col) };
         match &packed {
             None => unsafe {
                 cols.resize(k * n, 0.0);
-                im2col(
-                    src, channels, src_hw, kernel, gather, out_hw[1], p0, n, cols,
-                );
+                im2col(src, kernel, gather, out_hw[1], p0, n, cols);
                 gemm::gemm(
                     m,
                     n,
@@ -127,15 +129,11 @@ fn conv_gemm(
                     // SAFETY: AMX-BF16 (this engine) implies AVX-512 F/BW/BF16.
                     (Some(oy), Some(ox)) => unsafe {
                         let unit = UnitGather { offset: [oy, ox] };
-                        im2col_vnni(
-                            src, channels, src_hw, kernel, unit, out_hw[1], p0, n, n_pad, vnni,
-                        )
+                        im2col_vnni(src, kernel, unit, out_hw[1], p0, n, n_pad, vnni)
                     },
                     _ => {
                         cols.resize(k * n, 0.0);
-                        im2col(
-                            src, channels, src_hw, kernel, gather, out_hw[1], p0, n, cols,
-                        );
+                        im2col(src, kernel, gather, out_hw[1], p0, n, cols);
                         pack_right(cols, k, n, n_pad, vnni);
                     }
                 }
@@ -190,14 +188,17 @@ fn conv_gemm(
                         }
                     }
                 }
-                return;
             }
         }
-        if let Some(bias) = bias {
-            for (row, &bv) in bias.iter().enumerate() {
-                // SAFETY: as above.
-                let o = unsafe { std::slice::from_raw_parts_mut(out_at(row, 0), n) };
-                o.iter_mut().for_each(|v| *v += bv);
+        for row in 0..m {
+            // SAFETY: as above.
+            let o = unsafe { std::slice::from_raw_parts_mut(out_at(row, 0), n) };
+            if let (None, Some(bias)) = (&packed, bias) {
+                o.iter_mut().for_each(|v| *v += bias[row]);
+            }
+            if relu {
+                // NaN stays NaN (a diverging loss must still be seen).
+                o.iter_mut().filter(|v| **v < 0.0).for_each(|v| *v = 0.0);
             }
         }
     };
@@ -207,33 +208,46 @@ fn conv_gemm(
     out
 }
 
-/// `y = conv(x, w) + bias`: `x [batch, c_in, h, w]`, `w [c_out, c_in, kh, kw]` →
-/// `[batch, c_out, ho, wo]`.
+/// `y = conv(x, w) + bias`, then `max(y, 0)` when `relu`: `x [batch, c_in, h, w]`,
+/// `w [c_out, c_in, kh, kw]` → `[batch, c_out, ho, wo]`.
 pub fn forward(
     x: &[f32],
     w: &[f32],
     bias: Option<&[f32]>,
     g: &ConvGeometry,
+    relu: bool,
     engine: Engine,
 ) -> Vec<f32> {
-    let out_hw = g.out_hw();
+    let src = ImageSource {
+        values: x,
+        gate: None,
+        channels: g.c_in,
+        hw: g.input,
+    };
+    let gather = Gather::forward(g);
     conv_gemm(
-        x,
+        src,
         g.batch,
-        g.c_in,
-        g.input,
         g.kernel,
-        Gather::forward(g),
-        out_hw,
+        gather,
+        g.out_hw(),
         w,
         g.c_out,
         bias,
+        relu,
         engine,
     )
 }
 
-/// `∂L/∂x [batch, c_in, h, w]` from `∂L/∂y [batch, c_out, ho, wo]`.
-pub fn input_grad(grad_out: &[f32], w: &[f32], g: &ConvGeometry, engine: Engine) -> Vec<f32> {
+/// `∂L/∂x [batch, c_in, h, w]` from `∂L/∂y [batch, c_out, ho, wo]`; with `relu_out` (the
+/// output of a fused ReLU), from `∂L/∂y` where that output is positive.
+pub fn input_grad(
+    grad_out: &[f32],
+    relu_out: Option<&[f32]>,
+    w: &[f32],
+    g: &ConvGeometry,
+    engine: Engine,
+) -> Vec<f32> {
     let [kh, kw] = g.kernel;
     // The flipped kernel with its channels swapped: [c_in, c_out · kh · kw].
     let mut left = vec![0.0f32; g.c_in * g.c_out * kh * kw];
@@ -248,19 +262,25 @@ pub fn input_grad(grad_out: &[f32], w: &[f32], g: &ConvGeometry, engine: Engine)
         }
     }
     let t = g.transposed();
+    let src = ImageSource {
+        values: grad_out,
+        gate: relu_out,
+        channels: t.c_in,
+        hw: t.input,
+    };
+    let gather = Gather::transposed(g);
     conv_gemm(
-        grad_out,
-        g.batch,
-        t.c_in,
-        t.input,
-        g.kernel,
-        Gather::transposed(g),
-        g.input,
-        &left,
-        g.c_in,
-        None,
-        engine,
+        src, g.batch, g.kernel, gather, g.input, &left, g.c_in, None, false, engine,
     )
+}
+
+/// `∂L/∂y` where the fused ReLU's output is positive, zero elsewhere.
+pub fn relu_gate(grad_out: &[f32], relu_out: &[f32]) -> Vec<f32> {
+    grad_out
+        .iter()
+        .zip(relu_out)
+        .map(|(&g, &y)| if y > 0.0 { g } else { 0.0 })
+        .collect()
 }
 
 /// `∂L/∂w [c_out, c_in, kh, kw]` from the input and `∂L/∂y`, in f32.
@@ -280,17 +300,13 @@ pub fn weight_grad(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
                 let (b, p0) = (j / chunks, (j % chunks) * chunk);
                 let n = chunk.min(pixels - p0);
                 cols.resize(k * n, 0.0);
-                im2col(
-                    &x[b * image..(b + 1) * image],
-                    g.c_in,
-                    g.input,
-                    g.kernel,
-                    gather,
-                    out_hw[1],
-                    p0,
-                    n,
-                    &mut cols,
-                );
+                let src = ImageSource {
+                    values: &x[b * image..(b + 1) * image],
+                    gate: None,
+                    channels: g.c_in,
+                    hw: g.input,
+                };
+                im2col(src, g.kernel, gather, out_hw[1], p0, n, &mut cols);
                 let go = &grad_out[(b * g.c_out) * pixels + p0..];
                 // SAFETY: acc is [c_out, k]; grad_out rows of this image, columns p0 .. p0 + n;
                 // cols [k, n] read transposed.
@@ -410,12 +426,12 @@ mod tests {
         for (i, g) in geometries().into_iter().enumerate() {
             let [ho, wo] = g.out_hw();
             let (x, w, b, go) = operands(&g, i as u64);
-            let y = forward(&x, &w, Some(&b), &g, Engine::F32);
+            let y = forward(&x, &w, Some(&b), &g, false, Engine::F32);
             assert!(
                 worst(&y, &reference::forward(&x, &w, Some(&b), &g), 1.0) < 1e-4,
                 "{g:?}"
             );
-            let dx = input_grad(&go, &w, &g, Engine::F32);
+            let dx = input_grad(&go, None, &w, &g, Engine::F32);
             assert!(
                 worst(&dx, &reference::input_grad(&w, &go, &g), 1.0) < 1e-4,
                 "dx {g:?}"
@@ -448,14 +464,14 @@ mod tests {
         assert_eq!(Engine::bf16_or_f32(), Engine::Bf16Amx);
         for (i, g) in geometries().into_iter().enumerate() {
             let (x, w, b, go) = operands(&g, i as u64);
-            let y = forward(&x, &w, Some(&b), &g, Engine::Bf16Amx);
+            let y = forward(&x, &w, Some(&b), &g, false, Engine::Bf16Amx);
             let exact = reference::forward(&rounded(&x), &rounded(&w), Some(&b), &g);
             assert!(worst(&y, &exact, 1.0) < 1e-4, "rounded {g:?}");
             let full = reference::forward(&x, &w, Some(&b), &g);
             let scale = (g.taps() as f32).sqrt();
             let err = worst(&y, &full, scale);
             assert!(err < 1e-2 && err > 0.0, "bf16 vs f32 {err} {g:?}");
-            let dx = input_grad(&go, &w, &g, Engine::Bf16Amx);
+            let dx = input_grad(&go, None, &w, &g, Engine::Bf16Amx);
             let exact_dx = reference::input_grad(&rounded(&w), &rounded(&go), &g);
             assert!(worst(&dx, &exact_dx, 1.0) < 1e-4, "dx rounded {g:?}");
         }

@@ -4,13 +4,36 @@
 
 use crate::geometry::Gather;
 
+/// One image that im2col reads: `values [channels, h, w]`, and optionally a `gate` of the same
+/// shape: a value counts only where its gate is positive (the ReLU's backward, fused: the gate
+/// is the ReLU's output).
+#[derive(Clone, Copy, Debug)]
+pub struct ImageSource<'a> {
+    /// The values.
+    pub values: &'a [f32],
+    /// Zero the values whose gate is not positive.
+    pub gate: Option<&'a [f32]>,
+    /// Channels.
+    pub channels: usize,
+    /// Height and width.
+    pub hw: [usize; 2],
+}
+
+impl ImageSource<'_> {
+    /// The value at flat index `i`, gated.
+    #[inline]
+    pub fn at(&self, i: usize) -> f32 {
+        match self.gate {
+            Some(g) if g[i] <= 0.0 => 0.0,
+            _ => self.values[i],
+        }
+    }
+}
+
 /// Fills `cols` (`[channels·kh·kw, n]`, row-major) for output pixels `p0 .. p0 + n` of one image
-/// `src` (`[channels, h, w]`), reading through `gather`; taps outside the source are zeros.
-#[allow(clippy::too_many_arguments)]
+/// `src`, reading through `gather`; taps outside the source are zeros.
 pub fn im2col(
-    src: &[f32],
-    channels: usize,
-    src_hw: [usize; 2],
+    src: ImageSource,
     kernel: [usize; 2],
     gather: [Gather; 2],
     out_w: usize,
@@ -19,11 +42,11 @@ pub fn im2col(
     cols: &mut [f32],
 ) {
     let [kh, kw] = kernel;
-    let [h, w] = src_hw;
-    debug_assert_eq!(cols.len(), channels * kh * kw * n);
+    let [h, w] = src.hw;
+    debug_assert_eq!(cols.len(), src.channels * kh * kw * n);
     let mut row = 0;
-    for c in 0..channels {
-        let plane = &src[c * h * w..(c + 1) * h * w];
+    for c in 0..src.channels {
+        let plane = c * h * w;
         for ky in 0..kh {
             for kx in 0..kw {
                 let dst = &mut cols[row * n..(row + 1) * n];
@@ -35,10 +58,10 @@ pub fn im2col(
                     match gather[0].source(oy, ky) {
                         None => dst[i..i + run].fill(0.0),
                         Some(iy) => {
-                            let line = &plane[iy * w..(iy + 1) * w];
+                            let line = plane + iy * w;
                             for (j, d) in dst[i..i + run].iter_mut().enumerate() {
                                 *d = match gather[1].source(ox0 + j, kx) {
-                                    Some(ix) => line[ix],
+                                    Some(ix) => src.at(line + ix),
                                     None => 0.0,
                                 };
                             }

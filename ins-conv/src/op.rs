@@ -28,9 +28,30 @@ pub struct ConvParams {
     pub padding: [usize; 2],
     /// The GEMM engine of the forward and the input gradient.
     pub engine: Engine,
+    /// A ReLU fused after the convolution (and its mask fused into the input gradient).
+    pub relu: bool,
 }
 
 impl ConvParams {
+    /// The forward geometry, from the output gradient, the weight and the input's size.
+    fn backward_geometry(
+        &self,
+        grad_out: &impl TensorMetadata,
+        weight: &impl TensorMetadata,
+        input_hw: [usize; 2],
+    ) -> ConvGeometry {
+        let (gs, ws) = (grad_out.shape(), weight.shape());
+        ConvGeometry {
+            batch: gs[0],
+            c_in: ws[1],
+            c_out: ws[0],
+            input: input_hw,
+            kernel: [ws[2], ws[3]],
+            stride: self.stride,
+            padding: self.padding,
+        }
+    }
+
     fn geometry(&self, x: &impl TensorMetadata, weight: &impl TensorMetadata) -> ConvGeometry {
         let (xs, ws) = (x.shape(), weight.shape());
         assert_eq!(
@@ -74,6 +95,20 @@ pub trait ConvOps: Backend {
         params: ConvParams,
     ) -> FloatTensor<Self>;
 
+    /// `∂L/∂x` through the fused ReLU: `grad_out` counts where `relu_out` (the op's output) is
+    /// positive.
+    fn ins_conv2d_relu_input_grad(
+        grad_out: FloatTensor<Self>,
+        relu_out: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        input_hw: [usize; 2],
+        params: ConvParams,
+    ) -> FloatTensor<Self>;
+
+    /// `grad_out` where `relu_out` is positive, zero elsewhere (the fused ReLU's backward).
+    fn ins_relu_gate(grad_out: FloatTensor<Self>, relu_out: FloatTensor<Self>)
+    -> FloatTensor<Self>;
+
     /// `∂L/∂weight` (`[Co, Ci, kh, kw]`) for `grad_out [B, Co, Ho, Wo]`.
     fn ins_conv2d_weight_grad(
         x: FloatTensor<Self>,
@@ -103,7 +138,9 @@ impl ConvOps for Flex {
         let g = params.geometry(&x, &weight);
         let y = values(&x, |x| {
             values(&weight, |w| {
-                values(&bias, |b| conv::forward(x, w, Some(b), &g, params.engine))
+                values(&bias, |b| {
+                    conv::forward(x, w, Some(b), &g, params.relu, params.engine)
+                })
             })
         });
         let [ho, wo] = g.out_hw();
@@ -116,20 +153,39 @@ impl ConvOps for Flex {
         input_hw: [usize; 2],
         params: ConvParams,
     ) -> FlexTensor {
-        let (gs, ws) = (grad_out.shape(), weight.shape());
-        let g = ConvGeometry {
-            batch: gs[0],
-            c_in: ws[1],
-            c_out: ws[0],
-            input: input_hw,
-            kernel: [ws[2], ws[3]],
-            stride: params.stride,
-            padding: params.padding,
-        };
+        let g = params.backward_geometry(&grad_out, &weight, input_hw);
         let dx = values(&grad_out, |go| {
-            values(&weight, |w| conv::input_grad(go, w, &g, params.engine))
+            values(&weight, |w| {
+                conv::input_grad(go, None, w, &g, params.engine)
+            })
         });
         tensor(dx, [g.batch, g.c_in, input_hw[0], input_hw[1]])
+    }
+
+    fn ins_conv2d_relu_input_grad(
+        grad_out: FlexTensor,
+        relu_out: FlexTensor,
+        weight: FlexTensor,
+        input_hw: [usize; 2],
+        params: ConvParams,
+    ) -> FlexTensor {
+        let g = params.backward_geometry(&grad_out, &weight, input_hw);
+        let dx = values(&grad_out, |go| {
+            values(&relu_out, |y| {
+                values(&weight, |w| {
+                    conv::input_grad(go, Some(y), w, &g, params.engine)
+                })
+            })
+        });
+        tensor(dx, [g.batch, g.c_in, input_hw[0], input_hw[1]])
+    }
+
+    fn ins_relu_gate(grad_out: FlexTensor, relu_out: FlexTensor) -> FlexTensor {
+        let shape = grad_out.shape();
+        let gated = values(&grad_out, |go| {
+            values(&relu_out, |y| conv::relu_gate(go, y))
+        });
+        FlexTensor::from_data(TensorData::new(gated, shape))
     }
 
     fn ins_conv2d_weight_grad(
@@ -157,26 +213,43 @@ impl ConvOps for Flex {
 struct ConvBackward;
 
 impl<B: Backend + ConvOps> Backward<B, 3> for ConvBackward {
-    /// The input (for the weight gradient), the weight (for the input gradient), the params.
-    type State = (FloatTensor<B>, FloatTensor<B>, ConvParams);
+    /// The input (for the weight gradient), the weight (for the input gradient), the output
+    /// when a ReLU is fused (its mask), the params.
+    type State = (
+        FloatTensor<B>,
+        FloatTensor<B>,
+        Option<FloatTensor<B>>,
+        ConvParams,
+    );
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [x_node, weight_node, bias_node] = ops.parents;
         let grad = grads.consume::<B>(&ops.node);
-        let (x, weight, params) = ops.state;
+        let (x, weight, relu_out, params) = ops.state;
         let ws = weight.shape();
         let xs = x.shape();
-        if let Some(node) = bias_node {
-            // Σ over batch, height and width.
-            let g = B::float_sum_dim(B::float_sum_dim(B::float_sum_dim(grad.clone(), 0), 2), 3);
-            grads.register::<B>(node.id, B::float_reshape(g, [ws[0]].into()));
-        }
-        if let Some(node) = weight_node {
-            let g = B::ins_conv2d_weight_grad(x, grad.clone(), [ws[2], ws[3]], params);
-            grads.register::<B>(node.id, g);
+        if weight_node.is_some() || bias_node.is_some() {
+            let gated = match &relu_out {
+                Some(y) => B::ins_relu_gate(grad.clone(), y.clone()),
+                None => grad.clone(),
+            };
+            if let Some(node) = bias_node {
+                // Σ over batch, height and width.
+                let g =
+                    B::float_sum_dim(B::float_sum_dim(B::float_sum_dim(gated.clone(), 0), 2), 3);
+                grads.register::<B>(node.id, B::float_reshape(g, [ws[0]].into()));
+            }
+            if let Some(node) = weight_node {
+                let g = B::ins_conv2d_weight_grad(x, gated, [ws[2], ws[3]], params);
+                grads.register::<B>(node.id, g);
+            }
         }
         if let Some(node) = x_node {
-            let g = B::ins_conv2d_input_grad(grad, weight, [xs[2], xs[3]], params);
+            let hw = [xs[2], xs[3]];
+            let g = match relu_out {
+                Some(y) => B::ins_conv2d_relu_input_grad(grad, y, weight, hw, params),
+                None => B::ins_conv2d_input_grad(grad, weight, hw, params),
+            };
             grads.register::<B>(node.id, g);
         }
     }
@@ -197,7 +270,8 @@ impl<B: Backend + ConvOps, C: CheckpointStrategy> ConvOps for Autodiff<B, C> {
             OpsKind::Tracked(prep) => {
                 let (x, w) = (x.into_primitive(), weight.into_primitive());
                 let y = B::ins_conv2d(x.clone(), w.clone(), bias.into_primitive(), params);
-                prep.finish((x, w, params), y)
+                let relu_out = params.relu.then(|| y.clone());
+                prep.finish((x, w, relu_out, params), y)
             }
             OpsKind::UnTracked(prep) => prep.finish(B::ins_conv2d(
                 x.into_primitive(),
@@ -219,6 +293,32 @@ impl<B: Backend + ConvOps, C: CheckpointStrategy> ConvOps for Autodiff<B, C> {
             weight.into_primitive(),
             input_hw,
             params,
+        ))
+    }
+
+    fn ins_conv2d_relu_input_grad(
+        grad_out: FloatTensor<Self>,
+        relu_out: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        input_hw: [usize; 2],
+        params: ConvParams,
+    ) -> FloatTensor<Self> {
+        <Self as AutodiffBackend>::from_inner(B::ins_conv2d_relu_input_grad(
+            grad_out.into_primitive(),
+            relu_out.into_primitive(),
+            weight.into_primitive(),
+            input_hw,
+            params,
+        ))
+    }
+
+    fn ins_relu_gate(
+        grad_out: FloatTensor<Self>,
+        relu_out: FloatTensor<Self>,
+    ) -> FloatTensor<Self> {
+        <Self as AutodiffBackend>::from_inner(B::ins_relu_gate(
+            grad_out.into_primitive(),
+            relu_out.into_primitive(),
         ))
     }
 
@@ -292,7 +392,9 @@ mod tests {
             engines.push((Engine::Bf16Amx, 2e-2));
         }
         for (engine, tol) in engines {
-            for (xs, ws, stride, padding) in cases {
+            for ((xs, ws, stride, padding), relu) in
+                cases.iter().flat_map(|c| [(*c, false), (*c, true)])
+            {
                 let x = Tensor::<4>::random(xs, Distribution::Default, &d).require_grad();
                 let w = Tensor::<4>::random(ws, Distribution::Normal(0.0, 0.3), &d).require_grad();
                 let b = Tensor::<1>::random([ws[0]], Distribution::Default, &d).require_grad();
@@ -300,12 +402,25 @@ mod tests {
                     stride,
                     padding,
                     engine,
+                    relu,
                 };
                 let y = conv2d(x.clone(), w.clone(), Some(b.clone()), params);
                 let opts = ConvOptions::new(stride, padding, [1, 1], 1);
-                let y_ref = burn_conv2d(x.clone(), w.clone(), Some(b.clone()), opts);
-                let what = format!("{engine:?} {xs:?} {ws:?}");
-                close(y.clone(), y_ref.clone(), tol, &format!("y {what}"));
+                let conv_ref = burn_conv2d(x.clone(), w.clone(), Some(b.clone()), opts);
+                let what = format!("{engine:?} {xs:?} {ws:?} relu {relu}");
+                // The ReLU's gradient is taken where the op's own output is positive: in bf16 an
+                // output near zero may have the other sign than in f32.
+                let y_ref = match relu {
+                    true => {
+                        let value = burn::tensor::activation::relu(conv_ref.clone());
+                        close(y.clone(), value, tol, &format!("y {what}"));
+                        conv_ref * y.clone().detach().greater_elem(0.0).float()
+                    }
+                    false => {
+                        close(y.clone(), conv_ref.clone(), tol, &format!("y {what}"));
+                        conv_ref
+                    }
+                };
                 // A loss that weighs every output differently.
                 let probe = Tensor::<4>::random(y.dims(), Distribution::Default, &d);
                 let g = (y * probe.clone()).sum().backward();
@@ -339,6 +454,7 @@ mod tests {
             stride: [1, 1],
             padding: [1, 1],
             engine: Engine::F32,
+            relu: true,
         };
         let g = conv2d(x.clone(), w.clone(), None, params).sum().backward();
         assert!(x.grad(&g).is_some());

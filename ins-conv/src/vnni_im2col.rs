@@ -7,6 +7,7 @@
 //! times the AMX products it feeds; this is the same result in one pass.
 
 use crate::bf16::{TILE, TILE_K, round_up, to_bf16};
+use crate::im2col::ImageSource;
 
 /// A stride-1 gather along both axes: output position `o`, tap `t` read source `o + t + offset`.
 #[derive(Clone, Copy, Debug)]
@@ -23,9 +24,7 @@ pub struct UnitGather {
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
 pub unsafe fn im2col_vnni(
-    src: &[f32],
-    channels: usize,
-    src_hw: [usize; 2],
+    src: ImageSource,
     kernel: [usize; 2],
     gather: UnitGather,
     out_w: usize,
@@ -35,12 +34,18 @@ pub unsafe fn im2col_vnni(
     out: &mut Vec<u16>,
 ) {
     use std::arch::x86_64::*;
-    let [h, w] = src_hw;
+    let [h, w] = src.hw;
+    let channels = src.channels;
     let [kh, kw] = kernel;
     let k = channels * kh * kw;
     let kp = round_up(k, TILE_K);
     let kblocks = kp / TILE_K;
-    assert!(src.len() >= channels * h * w && n_pad % TILE == 0 && n <= n_pad);
+    assert!(
+        src.values.len() >= channels * h * w
+            && src.gate.is_none_or(|g| g.len() == src.values.len())
+            && n_pad % TILE == 0
+            && n <= n_pad
+    );
     out.resize(kp * n_pad, 0);
     // Lane j of the result takes bf16 lane j/2 of the first tap for even j, of the second for
     // odd j: the VNNI pair order.
@@ -59,15 +64,15 @@ pub unsafe fn im2col_vnni(
             )
         })
         .collect();
-    // The source of tap `kr` for a block starting at output (oy, ox0), and the mask of the
-    // lanes that fall inside the image.
-    let tap = |kr: usize, oy: usize, ox0: usize| -> (*const f32, __mmask16) {
+    // The offset in the image of tap `kr` for a block starting at output (oy, ox0), and the
+    // mask of the lanes that fall inside the image.
+    let tap = |kr: usize, oy: usize, ox0: usize| -> (isize, __mmask16) {
         let Some(&(plane, dy, dx)) = taps.get(kr) else {
-            return (src.as_ptr(), 0);
+            return (0, 0);
         };
         let iy = oy as isize + dy;
         if iy < 0 || iy >= h as isize {
-            return (src.as_ptr(), 0);
+            return (0, 0);
         }
         let ix0 = ox0 as isize + dx;
         let mask = if ix0 >= 0 && ix0 + 16 <= w as isize {
@@ -81,11 +86,22 @@ pub unsafe fn im2col_vnni(
                 0
             }
         };
-        (
-            src.as_ptr()
-                .wrapping_offset((plane + iy as usize * w) as isize + ix0),
-            mask,
-        )
+        ((plane + iy as usize * w) as isize + ix0, mask)
+    };
+    // Sixteen values from `offset`, the lanes outside `mask` (or with a gate ≤ 0) zero.
+    let load = |offset: isize, mask: __mmask16| -> __m512 {
+        // SAFETY: masked-off lanes are not read; the others lie inside the image.
+        unsafe {
+            let v = _mm512_maskz_loadu_ps(mask, src.values.as_ptr().wrapping_offset(offset));
+            match src.gate {
+                None => v,
+                Some(g) => {
+                    let g = _mm512_maskz_loadu_ps(mask, g.as_ptr().wrapping_offset(offset));
+                    let open = _mm512_mask_cmp_ps_mask(mask, g, _mm512_setzero_ps(), _CMP_GT_OQ);
+                    _mm512_maskz_mov_ps(open, v)
+                }
+            }
+        }
     };
     // SAFETY: every tile row written lies inside `out` (resized above); the loads are
     // explained where they happen.
@@ -104,11 +120,9 @@ pub unsafe fn im2col_vnni(
             for (nb, &(first, oy, ox0, whole_row)) in blocks.iter().enumerate() {
                 let dst = out_ptr.add(((nb * kblocks + kb) * TILE + pair) * TILE * 2);
                 if whole_row {
-                    let (p_a, m_a) = tap(2 * kpair, oy, ox0);
-                    let (p_b, m_b) = tap(2 * kpair + 1, oy, ox0);
-                    // SAFETY: masked-off lanes are not read; the others are inside `src`.
-                    let a = _mm512_maskz_loadu_ps(m_a, p_a);
-                    let b = _mm512_maskz_loadu_ps(m_b, p_b);
+                    let (o_a, m_a) = tap(2 * kpair, oy, ox0);
+                    let (o_b, m_b) = tap(2 * kpair + 1, oy, ox0);
+                    let (a, b) = (load(o_a, m_a), load(o_b, m_b));
                     let both: __m512i = std::mem::transmute(_mm512_cvtne2ps_pbh(b, a));
                     _mm512_storeu_si512(dst as *mut _, _mm512_permutexvar_epi16(interleave, both));
                 } else {
@@ -119,8 +133,12 @@ pub unsafe fn im2col_vnni(
                             let p = first + j;
                             let v = if p < n {
                                 let (oy, ox) = ((p0 + p) / out_w, (p0 + p) % out_w);
-                                let (ptr, mask) = tap(kr, oy, ox);
-                                if mask & 1 != 0 { *ptr } else { 0.0 }
+                                let (offset, mask) = tap(kr, oy, ox);
+                                if mask & 1 != 0 {
+                                    src.at(offset as usize)
+                                } else {
+                                    0.0
+                                }
                             } else {
                                 0.0
                             };

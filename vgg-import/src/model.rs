@@ -112,17 +112,19 @@ impl Vgg16Features {
         let conv = |i: usize, x: Tensor<4>| {
             let c = &self.convs[i];
             let (w, b) = (c.weight.val(), Some(c.bias.val()));
-            relu(match engine {
+            match engine {
+                // The ReLU is fused into the op (and its mask into the input gradient).
                 Some(engine) => {
                     let params = ConvParams {
                         stride: [1, 1],
                         padding: [1, 1],
                         engine,
+                        relu: true,
                     };
                     ins_conv::conv2d(x, w, b, params)
                 }
-                None => conv2d(x, w, b, opts.clone()),
-            })
+                None => relu(conv2d(x, w, b, opts.clone())),
+            }
         };
         let pool = |x: Tensor<4>| max_pool2d(x, MaxPoolOptions::new([2, 2]).with_stride([2, 2]));
         let x = conv(0, x);
