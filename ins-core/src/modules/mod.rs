@@ -26,4 +26,5 @@ pub mod sdf;
 pub mod sh;
 pub mod sim;
 pub mod sine;
+pub mod sine_op;
 pub mod surface_color;

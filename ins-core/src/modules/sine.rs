@@ -69,7 +69,7 @@ impl SineLayerConfig {
 impl SineLayer {
     /// `[N, d_in] → [N, d_out]`.
     pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
-        self.linear.forward(x).mul_scalar(self.omega0).sin()
+        super::sine_op::scaled_sin(self.linear.forward(x), self.omega0)
     }
 }
 
