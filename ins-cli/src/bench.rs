@@ -34,8 +34,9 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 5)]
     steps: usize,
     /// Arithmetic of the VGG convolutions: f32, or bf16 (AMX; f32 where the CPU lacks it).
-    #[arg(long, default_value = "f32")]
-    precision: Precision,
+    /// Default: bf16 where the CPU has AMX-BF16, as in training.
+    #[arg(long)]
+    precision: Option<Precision>,
 }
 
 const STYLE_WEIGHT: f64 = 1e8;
@@ -49,6 +50,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         args.workloads.clone()
     };
     let backend = args.backend.resolve();
+    let precision = args.precision.unwrap_or(Precision::Bf16.effective());
     for w in &workloads {
         let device = backend.device().autodiff();
         device.seed(42);
@@ -57,10 +59,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
             continue;
         }
         let times = match w.as_str() {
-            "vgg" => bench_vgg(&device, args.steps, args.precision)?,
-            "siren" => bench_siren(&device, args.steps, args.precision)?,
+            "vgg" => bench_vgg(&device, args.steps, precision)?,
+            "siren" => bench_siren(&device, args.steps, precision)?,
             "nerf-pretrain" => bench_nerf_pretrain(&device, args.steps)?,
-            "nerf-stylize" => bench_nerf_stylize(&device, args.steps, args.precision)?,
+            "nerf-stylize" => bench_nerf_stylize(&device, args.steps, precision)?,
             "nerf-grid" => bench_nerf_grid(&device, args.steps)?,
             "hash-grid" => bench_hash_grid(&device, args.steps, true)?,
             "hash-grid-reference" => bench_hash_grid(&device, args.steps, false)?,
@@ -81,7 +83,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "peak_rss_mb": peak_rss_mb(),
         });
         if matches!(w.as_str(), "vgg" | "siren" | "nerf-stylize") {
-            line["precision"] = args.precision.effective().to_string().into();
+            line["precision"] = precision.effective().to_string().into();
         }
         if let Some(rays) = rays_per_step(w) {
             line["rays_per_s"] = ((rays as f64 / median * 1e3).round()).into();

@@ -24,25 +24,33 @@ pub struct VggArgs {
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
     /// Arithmetic of the VGG convolutions: f32, or bf16 (BF16 products with f32 sums on Intel
-    /// AMX; falls back to f32 on CPUs without it).
-    #[arg(long, value_name = "P", default_value = "f32")]
-    pub precision: Precision,
+    /// AMX, f32 on CPUs without it). Default: bf16 where the CPU has AMX-BF16, else f32.
+    #[arg(long, value_name = "P")]
+    pub precision: Option<Precision>,
 }
 
 impl VggArgs {
+    /// The precision these arguments ask for, the default resolved for this CPU.
+    pub fn precision(&self) -> Precision {
+        self.precision.unwrap_or(Precision::Bf16.effective())
+    }
+
     /// Loads the VGG these arguments describe, at the asked precision (saying so when BF16 was
     /// asked for and this CPU cannot run it).
     pub fn load(&self, device: &Device) -> anyhow::Result<Vgg> {
         let vgg = load_vgg(&self.source(), device)?;
-        match (self.precision, self.precision.effective()) {
-            (Precision::Bf16, Precision::F32) => eprintln!(
+        let precision = self.precision();
+        match precision.effective() {
+            Precision::F32 if precision == Precision::Bf16 => eprintln!(
                 "--precision bf16: this CPU (or {}) offers no AMX-BF16; VGG runs in f32",
                 ins_conv::amx::DISABLE_ENV
             ),
-            (Precision::Bf16, Precision::Bf16) => eprintln!("VGG convolutions in bf16 on AMX"),
-            _ => {}
+            Precision::Bf16 => {
+                eprintln!("VGG convolutions in bf16 on AMX (--precision f32 for f32)")
+            }
+            Precision::F32 => {}
         }
-        Ok(vgg.with_precision(self.precision))
+        Ok(vgg.with_precision(precision))
     }
 
     /// The source description, fetching the default weights if needed.

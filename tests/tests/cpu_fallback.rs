@@ -5,7 +5,10 @@
 //! SSE only), and compares each run with the native one and with plain loops.
 //!
 //! The computation: odd-shaped matrix products, and 3×3 / 1×1 / strided convolutions with the
-//! gradients of both their input and their weight, on flex.
+//! gradients of both their input and their weight, on flex, through Burn's conv2d and through
+//! `ins-conv`'s op (f32 engine, with and without its fused ReLU: its AMX engine is never picked
+//! on these CPUs); and the SIREN's `sin(ω·z)` op, whose AVX-512 path the emulated CPUs replace
+//! by the plain one.
 //!
 //! A test binary without the libtest harness (`harness = false`): run with the environment
 //! variable below, it is the child that computes and writes its numbers.
@@ -17,6 +20,9 @@ use std::process::Command;
 use burn::prelude::*;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
+use ins_conv::Engine;
+use ins_conv::op::ConvParams;
+use ins_core::modules::sine_op::scaled_sin;
 use ins_tests::{max_rel_diff, values};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -139,7 +145,43 @@ fn compute() -> Results {
             format!("conv{i}_grad_weight"),
             values(wt.grad(&grads).expect("weight gradient")),
         );
+        for relu in [false, true] {
+            let params = ConvParams {
+                stride: [stride; 2],
+                padding: [pad; 2],
+                engine: Engine::F32,
+                relu,
+            };
+            let y = ins_conv::conv2d(xt.clone(), wt.clone(), None, params);
+            let up = random(&mut rng, y.shape().num_elements());
+            let up = tensor(&up, y.shape().dims::<4>(), &device);
+            let grads = (y.clone() * up).sum().backward();
+            let name = format!("ins_conv{i}_relu{}", relu as u8);
+            let mut naive = naive_conv(&x, &w, xs, [co, kh, kw], stride, pad);
+            if relu {
+                naive.iter_mut().for_each(|v| *v = v.max(0.0));
+            }
+            out.insert(name.clone(), values(y));
+            out.insert(format!("{name}_naive"), naive);
+            let dx = xt.grad(&grads).expect("input gradient");
+            out.insert(format!("{name}_grad_input"), values(dx));
+            let dw = wt.grad(&grads).expect("weight gradient");
+            out.insert(format!("{name}_grad_weight"), values(dw));
+        }
     }
+    let z = random(&mut rng, 4099);
+    let zt = tensor(&z, [4099], &device).require_grad();
+    let y = scaled_sin(zt.clone(), 30.0);
+    let grads = y.clone().sum().backward();
+    out.insert("sine".into(), values(y));
+    out.insert(
+        "sine_naive".into(),
+        z.iter().map(|v| (30.0 * v).sin()).collect(),
+    );
+    out.insert(
+        "sine_grad".into(),
+        values(zt.grad(&grads).expect("sine gradient")),
+    );
     out
 }
 
