@@ -5,8 +5,8 @@
 #
 #   scripts/bench_vs_torch.sh [--steps N] [--threads T] [--precision f32|bf16] [WORKLOAD ...]
 #
-# --precision is INS-rs's VGG arithmetic (bf16: AMX tiles where the CPU has them); PyTorch stays
-# in f32, as a user would run it.
+# --precision is INS-rs's VGG arithmetic (default: as `ins-cli`, bf16 on AMX where the CPU has
+# it, else f32); PyTorch stays in f32, as a user would run it.
 # Workloads: vgg siren nerf-pretrain nerf-stylize (default: all four). The reference program is
 # ../shared/bench/torch_ref.py (override with INS_TORCH_REF); the venv is .venv-torch (override
 # with INS_TORCH_VENV). Results also go to bench_vs_torch.jsonl.
@@ -15,13 +15,13 @@ cd "$(dirname "$0")/.."
 
 steps=3
 threads=2
-precision=f32
+precision=()
 workloads=()
 while (($#)); do
   case "$1" in
     --steps) steps="$2"; shift 2 ;;
     --threads) threads="$2"; shift 2 ;;
-    --precision) precision="$2"; shift 2 ;;
+    --precision) precision=(--precision "$2"); shift 2 ;;
     -h|--help) sed -n 2,13p "$0"; exit 0 ;;
     *) workloads+=("$1"); shift ;;
   esac
@@ -47,7 +47,7 @@ for w in "${workloads[@]}"; do
   echo "== $w: PyTorch, then INS-rs ($steps steps each after a warm-up)" >&2
   OMP_NUM_THREADS="$threads" "$venv/bin/python" "$ref" --threads "$threads" --steps "$steps" "$w" \
     | grep '^{' >> "$out"
-  RAYON_NUM_THREADS="$threads" "$cli" bench "$w" --steps "$steps" --precision "$precision" \
+  RAYON_NUM_THREADS="$threads" "$cli" bench "$w" --steps "$steps" "${precision[@]}" \
     | grep '^{' >> "$out"
 done
 
