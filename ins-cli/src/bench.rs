@@ -55,7 +55,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let device = backend.device().autodiff();
         device.seed(42);
         if w == "vgg-layers" {
-            crate::bench_vgg_layers::run(&device, &backend.to_string(), args.steps)?;
+            crate::bench_vgg_layers::run(&device, &backend.to_string(), args.steps, precision)?;
             continue;
         }
         let times = match w.as_str() {

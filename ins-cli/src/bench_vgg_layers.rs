@@ -1,6 +1,7 @@
 //! `ins-cli bench vgg-layers`: where a `vgg` step's time goes, per convolution: the forward
 //! (convolution + ReLU), the gradient to its input, and the gradient to its weights (which a
-//! frozen VGG never needs; timed to show what skipping it saves).
+//! frozen VGG never needs; timed to show what skipping it saves), at the asked precision (the
+//! weight gradient is f32 in both).
 
 use std::time::Instant;
 
@@ -10,6 +11,8 @@ use burn::tensor::Distribution;
 use burn::tensor::activation::relu;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
+use ins_conv::op::ConvParams;
+use ins_conv::{Engine, Precision};
 use vgg_import::onnx::VGG16_CHANNELS;
 
 /// Input side of each convolution for a 256×256 image (pools after conv 2, 4 and 7).
@@ -40,8 +43,22 @@ fn time(steps: usize, mut f: impl FnMut()) -> f64 {
 
 /// Prints one JSON line per convolution of VGG-16 at 256×256 (batch 1) on `device` (an
 /// autodiff device): forward, input-gradient and weight-gradient milliseconds and GFLOP/s.
-pub fn run(device: &Device, backend: &str, steps: usize) -> Result<()> {
+pub fn run(device: &Device, backend: &str, steps: usize, precision: Precision) -> Result<()> {
     let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+    let precision = precision.effective();
+    // conv + ReLU as VGG runs it at this precision: Burn's conv2d in f32, the fused op on AMX.
+    let conv_relu = |x: Tensor<4>, w: Tensor<4>, b: Tensor<1>| match precision {
+        Precision::F32 => relu(conv2d(x, w, Some(b), opts.clone())),
+        Precision::Bf16 => {
+            let params = ConvParams {
+                stride: [1, 1],
+                padding: [1, 1],
+                engine: Engine::Bf16Amx,
+                relu: true,
+            };
+            ins_conv::conv2d(x, w, Some(b), params)
+        }
+    };
     let mut totals = [0.0f64; 3];
     for (i, (&side, name)) in SIDES.iter().zip(NAMES).enumerate() {
         let c_in = if i == 0 { 3 } else { VGG16_CHANNELS[i - 1] };
@@ -51,7 +68,7 @@ pub fn run(device: &Device, backend: &str, steps: usize) -> Result<()> {
         let b = Tensor::<1>::random([c_out], Distribution::Default, device);
         let up = Tensor::<4>::random([1, c_out, side, side], Distribution::Default, device);
         let fwd = time(steps, || {
-            let y = relu(conv2d(x.clone(), w.clone(), Some(b.clone()), opts.clone()));
+            let y = conv_relu(x.clone(), w.clone(), b.clone());
             let _ = y.sum().into_scalar::<f32>();
         });
         // Backward of (y · up).sum() with only one of x, w tracked; the forward is subtracted.
@@ -62,12 +79,7 @@ pub fn run(device: &Device, backend: &str, steps: usize) -> Result<()> {
                 } else {
                     (x.clone(), w.clone().require_grad())
                 };
-                let y = relu(conv2d(
-                    xx.clone(),
-                    ww.clone(),
-                    Some(b.clone()),
-                    opts.clone(),
-                ));
+                let y = conv_relu(xx.clone(), ww.clone(), b.clone());
                 let grads = (y * up.clone()).sum().backward();
                 let g = if track_x {
                     xx.grad(&grads)
@@ -86,7 +98,7 @@ pub fn run(device: &Device, backend: &str, steps: usize) -> Result<()> {
         println!(
             "{}",
             serde_json::json!({
-                "workload": "vgg-layers", "backend": backend, "layer": name,
+                "workload": "vgg-layers", "backend": backend, "precision": precision.to_string(), "layer": name,
                 "input": [c_in, side, side], "out_channels": c_out, "gflop": (gflop * 100.0).round() / 100.0,
                 "forward_ms": (fwd * 10.0).round() / 10.0,
                 "input_grad_ms": (input_grad * 10.0).round() / 10.0,
@@ -98,7 +110,7 @@ pub fn run(device: &Device, backend: &str, steps: usize) -> Result<()> {
     println!(
         "{}",
         serde_json::json!({
-            "workload": "vgg-layers", "backend": backend, "layer": "total",
+            "workload": "vgg-layers", "backend": backend, "precision": precision.to_string(), "layer": "total",
             "forward_ms": (totals[0] * 10.0).round() / 10.0,
             "input_grad_ms": (totals[1] * 10.0).round() / 10.0,
             "weight_grad_ms": (totals[2] * 10.0).round() / 10.0,
