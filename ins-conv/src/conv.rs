@@ -259,13 +259,17 @@ pub fn input_grad(
     // The flipped kernel with its channels swapped: [c_in, c_out · kh · kw].
     let taps = kh * kw;
     let mut left = vec![0.0f32; g.c_in * g.c_out * taps];
-    left.par_chunks_mut(g.c_out * taps).enumerate().for_each(|(ci, row)| {
-        for (co, dst) in row.chunks_mut(taps).enumerate() {
-            let src = &w[(co * g.c_in + ci) * taps..][..taps];
-            // Flipping both axes of a row-major kernel reverses it.
-            dst.iter_mut().zip(src.iter().rev()).for_each(|(d, &v)| *d = v);
-        }
-    });
+    left.par_chunks_mut(g.c_out * taps)
+        .enumerate()
+        .for_each(|(ci, row)| {
+            for (co, dst) in row.chunks_mut(taps).enumerate() {
+                let src = &w[(co * g.c_in + ci) * taps..][..taps];
+                // Flipping both axes of a row-major kernel reverses it.
+                dst.iter_mut()
+                    .zip(src.iter().rev())
+                    .for_each(|(d, &v)| *d = v);
+            }
+        });
     let t = g.transposed();
     let src = ImageSource {
         values: grad_out,

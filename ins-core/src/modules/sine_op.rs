@@ -64,29 +64,31 @@ pub mod kernel {
         1.0 + r2 * p
     }
 
+    use std::mem::MaybeUninit;
+
     #[inline(always)]
-    fn forward_loop(z: &[f32], omega: f32, out: &mut [f32]) {
-        out.iter_mut()
-            .zip(z)
-            .for_each(|(o, &z)| *o = sin(omega * z));
+    fn forward_loop(z: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
+        out.iter_mut().zip(z).for_each(|(o, &z)| {
+            o.write(sin(omega * z));
+        });
     }
 
     #[inline(always)]
-    fn backward_loop(z: &[f32], g: &[f32], omega: f32, out: &mut [f32]) {
+    fn backward_loop(z: &[f32], g: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
         for ((o, &z), &g) in out.iter_mut().zip(z).zip(g) {
-            *o = omega * cos(omega * z) * g;
+            o.write(omega * cos(omega * z) * g);
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn forward_avx512(z: &[f32], omega: f32, out: &mut [f32]) {
+    fn forward_avx512(z: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
         forward_loop(z, omega, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn backward_avx512(z: &[f32], g: &[f32], omega: f32, out: &mut [f32]) {
+    fn backward_avx512(z: &[f32], g: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
         backward_loop(z, g, omega, out)
     }
 
@@ -98,7 +100,7 @@ pub mod kernel {
     }
 
     /// `out = sin(ω·z)`, 16 lanes at a time where the CPU has AVX-512.
-    pub fn forward(z: &[f32], omega: f32, out: &mut [f32]) {
+    pub fn forward(z: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
         #[cfg(target_arch = "x86_64")]
         if avx512() {
             // SAFETY: AVX-512F is present (checked at run time).
@@ -108,7 +110,7 @@ pub mod kernel {
     }
 
     /// `out = ω·cos(ω·z)·g`.
-    pub fn backward(z: &[f32], g: &[f32], omega: f32, out: &mut [f32]) {
+    pub fn backward(z: &[f32], g: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
         #[cfg(target_arch = "x86_64")]
         if avx512() {
             // SAFETY: as above.
@@ -134,6 +136,18 @@ pub trait ScaledSineOps: Backend {
 /// Elements per parallel job.
 const CHUNK: usize = 1 << 14;
 
+/// A vector of `n` values that `fill` writes chunk by chunk, in parallel, never zeroed first.
+fn filled(n: usize, fill: impl Fn(usize, &mut [std::mem::MaybeUninit<f32>]) + Sync) -> Vec<f32> {
+    let mut out = Vec::with_capacity(n);
+    out.spare_capacity_mut()[..n]
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(i, chunk)| fill(i * CHUNK, chunk));
+    // SAFETY: the kernels write every element of every chunk.
+    unsafe { out.set_len(n) };
+    out
+}
+
 fn contiguous(t: &FlexTensor) -> FlexTensor {
     assert_eq!(t.dtype(), DType::F32, "the sine op runs in f32");
     t.to_contiguous()
@@ -144,10 +158,9 @@ impl ScaledSineOps for Flex {
         let shape = z.shape();
         let z = contiguous(&z);
         let z = z.as_slice::<f32>().expect("contiguous f32");
-        let mut out = vec![0.0f32; z.len()];
-        out.par_chunks_mut(CHUNK)
-            .zip(z.par_chunks(CHUNK))
-            .for_each(|(o, z)| kernel::forward(z, omega, o));
+        let out = filled(z.len(), |at, o| {
+            kernel::forward(&z[at..][..o.len()], omega, o)
+        });
         FlexTensor::from_data(TensorData::new(out, shape))
     }
 
@@ -156,10 +169,9 @@ impl ScaledSineOps for Flex {
         let (z, g) = (contiguous(&z), contiguous(&grad));
         let z = z.as_slice::<f32>().expect("contiguous f32");
         let g = g.as_slice::<f32>().expect("contiguous f32");
-        let mut out = vec![0.0f32; z.len()];
-        out.par_chunks_mut(CHUNK)
-            .zip(z.par_chunks(CHUNK).zip(g.par_chunks(CHUNK)))
-            .for_each(|(o, (z, g))| kernel::backward(z, g, omega, o));
+        let out = filled(z.len(), |at, o| {
+            kernel::backward(&z[at..][..o.len()], &g[at..][..o.len()], omega, o)
+        });
         FlexTensor::from_data(TensorData::new(out, shape))
     }
 }
@@ -229,9 +241,13 @@ mod tests {
     #[test]
     fn kernels_match_libm() {
         let xs: Vec<f32> = (-400_000..=400_000).map(|i| i as f32 * 5e-4).collect();
-        let (mut s, mut c) = (vec![0.0; xs.len()], vec![0.0; xs.len()]);
-        kernel::forward(&xs, 1.0, &mut s);
-        kernel::backward(&xs, &vec![1.0; xs.len()], 1.0, &mut c);
+        let ones = vec![1.0; xs.len()];
+        let s = filled(xs.len(), |at, o| {
+            kernel::forward(&xs[at..][..o.len()], 1.0, o)
+        });
+        let c = filled(xs.len(), |at, o| {
+            kernel::backward(&xs[at..][..o.len()], &ones[at..][..o.len()], 1.0, o)
+        });
         let mut worst = 0.0f32;
         for ((x, s), c) in xs.iter().zip(&s).zip(&c) {
             worst = worst.max((s - x.sin()).abs()).max((c - x.cos()).abs());
