@@ -14,6 +14,7 @@
 pub mod am;
 pub mod cim;
 pub mod color_head;
+pub mod dense_op;
 pub mod encoding;
 pub mod field;
 pub mod grid_field;

@@ -1,0 +1,283 @@
+//! A dense layer `x·W + b` as one Flex op with its own backward, through the `gemm` crate.
+//!
+//! Flex's matmul zero-fills each output as bytes and then copies it to meet an alignment rule
+//! (`FlexTensor::empty`), and the layer adds its bias in another pass: about a tenth of a SIREN
+//! step went to `memset` and `memmove`. Here each result is written once, the bias first and
+//! the product accumulated onto it; the backward reads the operands through strides instead of
+//! transposed copies. Other backends keep Burn's `Linear` ([`dense`] picks).
+
+#![allow(deprecated)]
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::flex::FlexTensor;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{
+    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, TensorData,
+    TensorMetadata, backend_extension,
+};
+use burn::nn::Linear;
+use burn::prelude::*;
+
+/// The dense layer and its gradients as backend operations (`W` in Burn's `[in, out]` layout).
+#[backend_extension(Flex, Autodiff)]
+pub trait DenseOps: Backend {
+    /// `x [N, I]`, `w [I, O]`, `b [O]` → `x·w + b` `[N, O]`.
+    fn dense(x: FloatTensor<Self>, w: FloatTensor<Self>, b: FloatTensor<Self>)
+    -> FloatTensor<Self>;
+    /// `g·wᵀ` `[N, I]` for `g [N, O]`.
+    fn dense_grad_input(g: FloatTensor<Self>, w: FloatTensor<Self>) -> FloatTensor<Self>;
+    /// `xᵀ·g` `[I, O]`.
+    fn dense_grad_weight(x: FloatTensor<Self>, g: FloatTensor<Self>) -> FloatTensor<Self>;
+}
+
+fn contiguous(t: &FlexTensor) -> FlexTensor {
+    assert_eq!(t.dtype(), DType::F32, "the dense op runs in f32");
+    t.to_contiguous()
+}
+
+/// `dst [m, n]` (row-major, `read_dst`: accumulate onto it) `+= a · b`, where `a` is `[m, k]`
+/// and `b` is `[k, n]`, each given by its pointer and (row, column) strides.
+///
+/// # Safety
+/// Every stride-addressed element must lie inside its buffer, and `dst` must be writable.
+#[allow(clippy::too_many_arguments)]
+unsafe fn product(
+    [m, k, n]: [usize; 3],
+    dst: *mut f32,
+    read_dst: bool,
+    a: (*const f32, [isize; 2]),
+    b: (*const f32, [isize; 2]),
+) {
+    // SAFETY: the caller's promise.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst,
+            1,
+            n as isize,
+            read_dst,
+            a.0,
+            a.1[1],
+            a.1[0],
+            b.0,
+            b.1[1],
+            b.1[0],
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::Rayon(0),
+        )
+    }
+}
+
+/// A `[rows, cols]` tensor whose values `fill` writes in full (the buffer is not zeroed first).
+fn written(rows: usize, cols: usize, fill: impl FnOnce(*mut f32)) -> FlexTensor {
+    let len = rows * cols;
+    let mut out = Vec::<f32>::with_capacity(len);
+    fill(out.as_mut_ptr());
+    // SAFETY: every caller's `fill` writes all `len` values (a GEMM with `read_dst = false`, or
+    // the bias rows before a GEMM that accumulates onto them).
+    unsafe { out.set_len(len) };
+    FlexTensor::from_data(TensorData::new(out, [rows, cols]))
+}
+
+impl DenseOps for Flex {
+    fn dense(x: FlexTensor, w: FlexTensor, b: FlexTensor) -> FlexTensor {
+        let (x, w, b) = (contiguous(&x), contiguous(&w), contiguous(&b));
+        let ([n, i], [wi, o]) = (dims(&x), dims(&w));
+        assert_eq!(i, wi, "dense: input width {i}, weight rows {wi}");
+        let (x, w, b) = (slice(&x), slice(&w), slice(&b));
+        written(n, o, |dst| {
+            for r in 0..n {
+                // SAFETY: row r of n, `o` values.
+                unsafe { std::ptr::copy_nonoverlapping(b.as_ptr(), dst.add(r * o), o) };
+            }
+            // SAFETY: x is [n, i], w is [i, o], dst is [n, o], all row-major.
+            unsafe {
+                product(
+                    [n, i, o],
+                    dst,
+                    true,
+                    (x.as_ptr(), [i as isize, 1]),
+                    (w.as_ptr(), [o as isize, 1]),
+                )
+            }
+        })
+    }
+
+    fn dense_grad_input(g: FlexTensor, w: FlexTensor) -> FlexTensor {
+        let (g, w) = (contiguous(&g), contiguous(&w));
+        let ([n, o], [i, _]) = (dims(&g), dims(&w));
+        let (g, w) = (slice(&g), slice(&w));
+        // g [n, o] · wᵀ: w is [i, o] row-major, so wᵀ [o, i] has strides (1, o).
+        written(n, i, |dst| unsafe {
+            product(
+                [n, o, i],
+                dst,
+                false,
+                (g.as_ptr(), [o as isize, 1]),
+                (w.as_ptr(), [1, o as isize]),
+            )
+        })
+    }
+
+    fn dense_grad_weight(x: FlexTensor, g: FlexTensor) -> FlexTensor {
+        let (x, g) = (contiguous(&x), contiguous(&g));
+        let ([n, i], [_, o]) = (dims(&x), dims(&g));
+        let (x, g) = (slice(&x), slice(&g));
+        // xᵀ [i, n] has strides (1, i); g is [n, o].
+        written(i, o, |dst| unsafe {
+            product(
+                [i, n, o],
+                dst,
+                false,
+                (x.as_ptr(), [1, i as isize]),
+                (g.as_ptr(), [o as isize, 1]),
+            )
+        })
+    }
+}
+
+fn dims(t: &FlexTensor) -> [usize; 2] {
+    let s = t.shape();
+    [s[0], s[1]]
+}
+
+fn slice(t: &FlexTensor) -> &[f32] {
+    t.as_slice::<f32>().expect("contiguous f32")
+}
+
+#[derive(Debug)]
+struct DenseBackward;
+
+impl<B: Backend + DenseOps> Backward<B, 3> for DenseBackward {
+    /// The input (for the weight gradient) and the weight (for the input gradient).
+    type State = (FloatTensor<B>, FloatTensor<B>);
+
+    fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
+        let [x_node, w_node, b_node] = ops.parents;
+        let g = grads.consume::<B>(&ops.node);
+        let (x, w) = ops.state;
+        if let Some(node) = b_node {
+            let out = w.shape()[1];
+            let db = B::float_reshape(B::float_sum_dim(g.clone(), 0), [out].into());
+            grads.register::<B>(node.id, db);
+        }
+        if let Some(node) = w_node {
+            grads.register::<B>(node.id, B::dense_grad_weight(x, g.clone()));
+        }
+        if let Some(node) = x_node {
+            grads.register::<B>(node.id, B::dense_grad_input(g, w));
+        }
+    }
+}
+
+impl<B: Backend + DenseOps, C: CheckpointStrategy> DenseOps for Autodiff<B, C> {
+    fn dense(
+        x: FloatTensor<Self>,
+        w: FloatTensor<Self>,
+        b: FloatTensor<Self>,
+    ) -> FloatTensor<Self> {
+        match DenseBackward
+            .prepare::<C>([x.node(), w.node(), b.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                let (x, w) = (x.into_primitive(), w.into_primitive());
+                let y = B::dense(x.clone(), w.clone(), b.into_primitive());
+                prep.finish((x, w), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::dense(
+                x.into_primitive(),
+                w.into_primitive(),
+                b.into_primitive(),
+            )),
+        }
+    }
+
+    fn dense_grad_input(g: FloatTensor<Self>, w: FloatTensor<Self>) -> FloatTensor<Self> {
+        <Self as AutodiffBackend>::from_inner(B::dense_grad_input(
+            g.into_primitive(),
+            w.into_primitive(),
+        ))
+    }
+
+    fn dense_grad_weight(x: FloatTensor<Self>, g: FloatTensor<Self>) -> FloatTensor<Self> {
+        <Self as AutodiffBackend>::from_inner(B::dense_grad_weight(
+            x.into_primitive(),
+            g.into_primitive(),
+        ))
+    }
+}
+
+/// `layer.forward(x)` for `x [N, in]`: through the op on Flex (with or without autodiff),
+/// through Burn's `Linear` elsewhere.
+pub fn dense(layer: &Linear, x: Tensor<2>) -> Tensor<2> {
+    let flex = matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_));
+    if !flex {
+        return layer.forward(x);
+    }
+    let w = layer.weight.val();
+    let b = match &layer.bias {
+        Some(b) => b.val(),
+        None => Tensor::zeros([w.dims()[1]], &w.device()),
+    };
+    Tensor::from_dispatch(<Dispatch as DenseOps>::dense(
+        x.into_dispatch(),
+        w.into_dispatch(),
+        b.into_dispatch(),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::nn::LinearConfig;
+    use burn::tensor::Distribution;
+
+    fn worst(a: Tensor<2>, b: Tensor<2>) -> f32 {
+        let scale = b.clone().abs().max().into_scalar::<f32>().max(1e-6);
+        (a - b).abs().max().into_scalar::<f32>() / scale
+    }
+
+    /// Against Burn's `Linear` under autodiff, on odd widths: value and the gradients of the
+    /// input, the weight and the bias.
+    #[test]
+    fn matches_burn_linear_in_value_and_all_gradients() {
+        let d = Device::flex().autodiff();
+        d.seed(11);
+        for (n, i, o, bias) in [(37, 129, 61, true), (300, 2, 256, true), (5, 17, 3, false)] {
+            let layer = LinearConfig::new(i, o).with_bias(bias).init(&d);
+            let x = Tensor::<2>::random([n, i], Distribution::Default, &d).require_grad();
+            let probe = Tensor::<2>::random([n, o], Distribution::Default, &d);
+            let y = dense(&layer, x.clone());
+            let y_ref = layer.forward(x.clone());
+            assert!(worst(y.clone(), y_ref.clone()) < 1e-5, "value {n}×{i}→{o}");
+            let g = (y * probe.clone()).sum().backward();
+            let g_ref = (y_ref * probe).sum().backward();
+            let what = format!("{n}×{i}→{o}");
+            assert!(
+                worst(x.grad(&g).unwrap(), x.grad(&g_ref).unwrap()) < 1e-5,
+                "dx {what}"
+            );
+            let w = layer.weight.val();
+            assert!(
+                worst(w.grad(&g).unwrap(), w.grad(&g_ref).unwrap()) < 1e-5,
+                "dw {what}"
+            );
+            if let Some(b) = &layer.bias {
+                let (db, db_ref) = (b.val().grad(&g).unwrap(), b.val().grad(&g_ref).unwrap());
+                let err = (db - db_ref).abs().max().into_scalar::<f32>();
+                assert!(err < 1e-4, "db {what}: {err}");
+            }
+        }
+    }
+}
