@@ -75,7 +75,7 @@ fn conv_gemm(
     relu: bool,
     engine: Engine,
 ) -> Vec<f32> {
-    let (channels, src_hw) = (src.channels, src.hw);
+    let channels = src.channels;
     let k = channels * kernel[0] * kernel[1];
     let pixels = out_hw[0] * out_hw[1];
     let chunk = (CHUNK_BYTES / (4 * k)).max(1);
@@ -86,17 +86,12 @@ fn conv_gemm(
     let len = batch * m * pixels;
     let mut out = Vec::<f32>::with_capacity(len);
     let dst = Shared(out.as_mut_ptr());
-    let image = channels * src_hw[0] * src_hw[1];
     let packed = (engine == Engine::Bf16Amx).then(|| PackedLeft::new(left, m, k));
     let job = |cols: &mut Vec<f32>, vnni: &mut Vec<u16>, b: usize, c: usize| {
         let dst = dst;
         let p0 = c * chunk;
         let n = chunk.min(pixels - p0);
-        let src = ImageSource {
-            values: &src.values[b * image..(b + 1) * image],
-            gate: src.gate.map(|g| &g[b * image..(b + 1) * image]),
-            ..src
-        };
+        let src = src.image(b);
         // SAFETY: rows `m` of image `b`, columns `p0 .. p0 + n`: this job's alone.
         let out_at =
             |row: usize, col: usize| unsafe { dst.0.add((b * m + row) * pixels + p0 + col) };
@@ -225,12 +220,7 @@ pub fn forward(
     relu: bool,
     engine: Engine,
 ) -> Vec<f32> {
-    let src = ImageSource {
-        values: x,
-        gate: None,
-        channels: g.c_in,
-        hw: g.input,
-    };
+    let src = ImageSource::new(x, g.c_in, g.input);
     let gather = Gather::forward(g);
     conv_gemm(
         src,
@@ -272,10 +262,8 @@ pub fn input_grad(
         });
     let t = g.transposed();
     let src = ImageSource {
-        values: grad_out,
         gate: relu_out,
-        channels: t.c_in,
-        hw: t.input,
+        ..ImageSource::new(grad_out, t.c_in, t.input)
     };
     let gather = Gather::transposed(g);
     conv_gemm(
@@ -299,7 +287,6 @@ pub fn weight_grad(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
     let pixels = out_hw[0] * out_hw[1];
     let chunk = (CHUNK_BYTES / (4 * k)).clamp(1, pixels);
     let chunks = pixels.div_ceil(chunk);
-    let image = g.c_in * g.input[0] * g.input[1];
     let gather = Gather::forward(g);
     (0..g.batch * chunks)
         .into_par_iter()
@@ -309,12 +296,7 @@ pub fn weight_grad(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
                 let (b, p0) = (j / chunks, (j % chunks) * chunk);
                 let n = chunk.min(pixels - p0);
                 cols.resize(k * n, 0.0);
-                let src = ImageSource {
-                    values: &x[b * image..(b + 1) * image],
-                    gate: None,
-                    channels: g.c_in,
-                    hw: g.input,
-                };
+                let src = ImageSource::new(x, g.c_in, g.input).image(b);
                 im2col(src, g.kernel, gather, out_hw[1], p0, n, &mut cols);
                 let go = &grad_out[(b * g.c_out) * pixels + p0..];
                 // SAFETY: acc is [c_out, k]; grad_out rows of this image, columns p0 .. p0 + n;

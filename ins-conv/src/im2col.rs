@@ -19,7 +19,27 @@ pub struct ImageSource<'a> {
     pub hw: [usize; 2],
 }
 
-impl ImageSource<'_> {
+impl<'a> ImageSource<'a> {
+    /// Ungated values of `channels × hw` images.
+    pub fn new(values: &'a [f32], channels: usize, hw: [usize; 2]) -> Self {
+        Self {
+            values,
+            gate: None,
+            channels,
+            hw,
+        }
+    }
+
+    /// Image `b` of a batch held in `values` (and `gate`).
+    pub fn image(self, b: usize) -> Self {
+        let len = self.channels * self.hw[0] * self.hw[1];
+        Self {
+            values: &self.values[b * len..(b + 1) * len],
+            gate: self.gate.map(|g| &g[b * len..(b + 1) * len]),
+            ..self
+        }
+    }
+
     /// The value at flat index `i`, gated.
     #[inline]
     pub fn at(&self, i: usize) -> f32 {
