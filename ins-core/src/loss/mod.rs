@@ -5,6 +5,7 @@
 //! G = F Fᵀ / (C·H·W). Content: mean((relu2_2(x) − relu2_2(c))²).
 
 pub mod gram;
+pub mod gram_op;
 pub mod perceptual;
 pub mod pixel;
 pub mod ssim;

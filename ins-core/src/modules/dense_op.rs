@@ -1,10 +1,10 @@
 //! A dense layer `x·W + b` as one Flex op with its own backward, through the `gemm` crate.
 //!
-//! Flex's matmul zero-fills each output as bytes and then copies it to meet an alignment rule
-//! (`FlexTensor::empty`), and the layer adds its bias in another pass: about a tenth of a SIREN
-//! step went to `memset` and `memmove`. Here each result is written once, the bias first and
-//! the product accumulated onto it; the backward reads the operands through strides instead of
-//! transposed copies. Other backends keep Burn's `Linear` ([`dense`] picks).
+//! Flex's matmul zero-fills and copies each output, and the layer adds its bias in another
+//! pass: about a tenth of a SIREN step went to `memset` and `memmove`. Here each result is
+//! written once, the bias first and the product accumulated onto it (`flex_gemm.rs`); the
+//! backward reads the operands through strides instead of transposed copies. Other backends
+//! keep Burn's `Linear` ([`dense`] picks).
 
 #![allow(deprecated)]
 
@@ -15,11 +15,13 @@ use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
-    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, TensorData,
-    TensorMetadata, backend_extension,
+    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, TensorMetadata,
+    backend_extension,
 };
 use burn::nn::Linear;
 use burn::prelude::*;
+
+use crate::flex_gemm::{product, values as slice, written};
 
 /// The dense layer and its gradients as backend operations (`W` in Burn's `[in, out]` layout).
 #[backend_extension(Flex, Autodiff)]
@@ -38,78 +40,29 @@ fn contiguous(t: &FlexTensor) -> FlexTensor {
     t.to_contiguous()
 }
 
-/// `dst [m, n]` (row-major, `read_dst`: accumulate onto it) `+= a · b`, where `a` is `[m, k]`
-/// and `b` is `[k, n]`, each given by its pointer and (row, column) strides.
-///
-/// # Safety
-/// Every stride-addressed element must lie inside its buffer, and `dst` must be writable.
-#[allow(clippy::too_many_arguments)]
-unsafe fn product(
-    [m, k, n]: [usize; 3],
-    dst: *mut f32,
-    read_dst: bool,
-    a: (*const f32, [isize; 2]),
-    b: (*const f32, [isize; 2]),
-) {
-    // SAFETY: the caller's promise.
-    unsafe {
-        gemm::gemm(
-            m,
-            n,
-            k,
-            dst,
-            1,
-            n as isize,
-            read_dst,
-            a.0,
-            a.1[1],
-            a.1[0],
-            b.0,
-            b.1[1],
-            b.1[0],
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::Rayon(0),
-        )
-    }
-}
-
-/// A `[rows, cols]` tensor whose values `fill` writes in full (the buffer is not zeroed first).
-fn written(rows: usize, cols: usize, fill: impl FnOnce(*mut f32)) -> FlexTensor {
-    let len = rows * cols;
-    let mut out = Vec::<f32>::with_capacity(len);
-    fill(out.as_mut_ptr());
-    // SAFETY: every caller's `fill` writes all `len` values (a GEMM with `read_dst = false`, or
-    // the bias rows before a GEMM that accumulates onto them).
-    unsafe { out.set_len(len) };
-    FlexTensor::from_data(TensorData::new(out, [rows, cols]))
-}
-
 impl DenseOps for Flex {
     fn dense(x: FlexTensor, w: FlexTensor, b: FlexTensor) -> FlexTensor {
         let (x, w, b) = (contiguous(&x), contiguous(&w), contiguous(&b));
         let ([n, i], [wi, o]) = (dims(&x), dims(&w));
         assert_eq!(i, wi, "dense: input width {i}, weight rows {wi}");
         let (x, w, b) = (slice(&x), slice(&w), slice(&b));
-        written(n, o, |dst| {
-            for r in 0..n {
-                // SAFETY: row r of n, `o` values.
-                unsafe { std::ptr::copy_nonoverlapping(b.as_ptr(), dst.add(r * o), o) };
-            }
-            // SAFETY: x is [n, i], w is [i, o], dst is [n, o], all row-major.
-            unsafe {
+        // SAFETY: the bias fills every row, then the product accumulates onto it; x is
+        // [n, i], w is [i, o], dst is [n, o], all row-major.
+        unsafe {
+            written([n, o], |dst| {
+                for r in 0..n {
+                    std::ptr::copy_nonoverlapping(b.as_ptr(), dst.add(r * o), o);
+                }
                 product(
                     [n, i, o],
                     dst,
                     true,
+                    1.0,
                     (x.as_ptr(), [i as isize, 1]),
                     (w.as_ptr(), [o as isize, 1]),
                 )
-            }
-        })
+            })
+        }
     }
 
     fn dense_grad_input(g: FlexTensor, w: FlexTensor) -> FlexTensor {
@@ -117,15 +70,19 @@ impl DenseOps for Flex {
         let ([n, o], [i, _]) = (dims(&g), dims(&w));
         let (g, w) = (slice(&g), slice(&w));
         // g [n, o] · wᵀ: w is [i, o] row-major, so wᵀ [o, i] has strides (1, o).
-        written(n, i, |dst| unsafe {
-            product(
-                [n, o, i],
-                dst,
-                false,
-                (g.as_ptr(), [o as isize, 1]),
-                (w.as_ptr(), [1, o as isize]),
-            )
-        })
+        // SAFETY: a GEMM writes all of dst [n, i].
+        unsafe {
+            written([n, i], |dst| {
+                product(
+                    [n, o, i],
+                    dst,
+                    false,
+                    1.0,
+                    (g.as_ptr(), [o as isize, 1]),
+                    (w.as_ptr(), [1, o as isize]),
+                )
+            })
+        }
     }
 
     fn dense_grad_weight(x: FlexTensor, g: FlexTensor) -> FlexTensor {
@@ -133,25 +90,25 @@ impl DenseOps for Flex {
         let ([n, i], [_, o]) = (dims(&x), dims(&g));
         let (x, g) = (slice(&x), slice(&g));
         // xᵀ [i, n] has strides (1, i); g is [n, o].
-        written(i, o, |dst| unsafe {
-            product(
-                [i, n, o],
-                dst,
-                false,
-                (x.as_ptr(), [1, i as isize]),
-                (g.as_ptr(), [o as isize, 1]),
-            )
-        })
+        // SAFETY: a GEMM writes all of dst [i, o].
+        unsafe {
+            written([i, o], |dst| {
+                product(
+                    [i, n, o],
+                    dst,
+                    false,
+                    1.0,
+                    (x.as_ptr(), [1, i as isize]),
+                    (g.as_ptr(), [o as isize, 1]),
+                )
+            })
+        }
     }
 }
 
 fn dims(t: &FlexTensor) -> [usize; 2] {
     let s = t.shape();
     [s[0], s[1]]
-}
-
-fn slice(t: &FlexTensor) -> &[f32] {
-    t.as_slice::<f32>().expect("contiguous f32")
 }
 
 #[derive(Debug)]

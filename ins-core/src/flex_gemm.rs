@@ -1,0 +1,73 @@
+//! The one strided f32 GEMM that the hand-written Flex ops (dense layer, Gram matrix) share,
+//! and a tensor that a GEMM writes without zeroing it first.
+//!
+//! Flex's matmul zero-fills each output as bytes and then copies it to meet an alignment rule
+//! (`FlexTensor::empty`), and reads transposed operands through copies. These ops write each
+//! result once and read transposes through strides.
+
+use burn::backend::TensorData;
+use burn::backend::flex::FlexTensor;
+
+/// A matrix operand: its first element and its (row, column) strides in elements.
+pub(crate) type Strided = (*const f32, [isize; 2]);
+
+/// `dst [m, n]` (row-major) `= scale · a · b`, or `+=` when `accumulate`; `a` is `[m, k]` and
+/// `b` is `[k, n]`.
+///
+/// # Safety
+/// Every stride-addressed element must lie inside its buffer, and `dst` must be writable for
+/// `m·n` values (and initialised when `accumulate`).
+pub(crate) unsafe fn product(
+    [m, k, n]: [usize; 3],
+    dst: *mut f32,
+    accumulate: bool,
+    scale: f32,
+    a: Strided,
+    b: Strided,
+) {
+    // SAFETY: the caller's promise.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst,
+            1,
+            n as isize,
+            accumulate,
+            a.0,
+            a.1[1],
+            a.1[0],
+            b.0,
+            b.1[1],
+            b.1[0],
+            1.0,
+            scale,
+            false,
+            false,
+            false,
+            gemm::Parallelism::Rayon(0),
+        )
+    }
+}
+
+/// A tensor of `shape` whose values `fill` writes in full (the buffer is not zeroed first).
+///
+/// # Safety
+/// `fill` must write every one of the `shape`'s elements.
+pub(crate) unsafe fn written<const D: usize>(
+    shape: [usize; D],
+    fill: impl FnOnce(*mut f32),
+) -> FlexTensor {
+    let len = shape.iter().product();
+    let mut out = Vec::<f32>::with_capacity(len);
+    fill(out.as_mut_ptr());
+    // SAFETY: the caller's promise.
+    unsafe { out.set_len(len) };
+    FlexTensor::from_data(TensorData::new(out, shape))
+}
+
+/// The f32 values of a contiguous tensor.
+pub(crate) fn values(t: &FlexTensor) -> &[f32] {
+    t.as_slice::<f32>().expect("contiguous f32")
+}
