@@ -8,7 +8,7 @@ pub mod backend;
 pub mod contain;
 pub mod data;
 pub mod eval;
-mod flex_gemm;
+mod flex_kernels;
 pub mod imaging;
 pub mod loss;
 pub mod mesh;

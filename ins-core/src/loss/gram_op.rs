@@ -17,7 +17,7 @@ use burn::backend::{
 };
 use burn::prelude::*;
 
-use crate::flex_gemm::{product, values, written};
+use crate::flex_kernels::{product, values, written};
 
 /// The Gram matrix and its gradient as backend operations.
 #[backend_extension(Flex, Autodiff)]
@@ -25,8 +25,7 @@ pub trait GramOps: Backend {
     /// `f [B, C, P]` → `scale · f fᵀ` `[B, C, C]`.
     fn gram(f: FloatTensor<Self>, scale: f32) -> FloatTensor<Self>;
     /// `scale · (g + gᵀ) · f` `[B, C, P]` for `g [B, C, C]`.
-    fn gram_backward(g: FloatTensor<Self>, f: FloatTensor<Self>, scale: f32)
-    -> FloatTensor<Self>;
+    fn gram_backward(g: FloatTensor<Self>, f: FloatTensor<Self>, scale: f32) -> FloatTensor<Self>;
 }
 
 fn contiguous(t: &FlexTensor) -> FlexTensor {

@@ -28,4 +28,5 @@ pub mod sh;
 pub mod sim;
 pub mod sine;
 pub mod sine_op;
+pub mod softplus_op;
 pub mod surface_color;

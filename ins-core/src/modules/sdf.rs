@@ -20,10 +20,11 @@ use burn::module::Param;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
-use burn::tensor::activation::{sigmoid, softplus};
 
+use super::dense_op::dense;
 use super::encoding::FourierEncoding;
 use super::hash_grid::{HashGrid, HashGridConfig};
+use super::softplus_op::{softplus, softplus_slope};
 
 /// Softplus sharpness (IDR).
 const BETA: f64 = 100.0;
@@ -72,14 +73,14 @@ impl Dual {
     fn linear(self, l: &Linear) -> Self {
         let w = l.weight.val();
         Self {
-            h: l.forward(self.h),
+            h: dense(l, self.h),
             t: self.t.matmul(w),
         }
     }
 
     fn softplus(self) -> Self {
         let [n, d] = self.h.dims();
-        let slope = sigmoid(self.h.clone().mul_scalar(BETA as f32));
+        let slope = softplus_slope(self.h.clone(), BETA);
         let slope = slope
             .unsqueeze_dim::<3>(0)
             .expand([3, n, d])
@@ -262,7 +263,7 @@ impl SdfMlp {
                 h = Tensor::cat(vec![h, input.clone()], 1)
                     .mul_scalar(std::f32::consts::FRAC_1_SQRT_2);
             }
-            h = layer.forward(h);
+            h = dense(layer, h);
             if l < last {
                 h = softplus(h, BETA);
             }
@@ -370,10 +371,10 @@ impl SdfGrid {
     pub fn forward(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
         let enc = self.grid.forward(self.unit(x.clone()));
         let h = softplus(
-            self.hidden.forward(Tensor::cat(vec![x.clone(), enc], 1)),
+            dense(&self.hidden, Tensor::cat(vec![x.clone(), enc], 1)),
             BETA,
         );
-        let out = self.out.forward(h);
+        let out = dense(&self.out, h);
         let [n, d] = out.dims();
         let (sdf, _) = add_sphere(
             x,

@@ -15,7 +15,8 @@ use burn::backend::{
     TensorMetadata, backend_extension,
 };
 use burn::prelude::*;
-use rayon::prelude::*;
+
+use crate::flex_kernels::filled;
 
 /// The kernels: range reduction to `[-π, π]` (two-constant, exact for `|x|` below ~10⁵),
 /// then Taylor polynomials to degree 15 (sin) and 16 (cos): absolute error below 2·10⁻⁶.
@@ -131,21 +132,6 @@ pub trait ScaledSineOps: Backend {
         grad: FloatTensor<Self>,
         omega: f32,
     ) -> FloatTensor<Self>;
-}
-
-/// Elements per parallel job.
-const CHUNK: usize = 1 << 14;
-
-/// A vector of `n` values that `fill` writes chunk by chunk, in parallel, never zeroed first.
-fn filled(n: usize, fill: impl Fn(usize, &mut [std::mem::MaybeUninit<f32>]) + Sync) -> Vec<f32> {
-    let mut out = Vec::with_capacity(n);
-    out.spare_capacity_mut()[..n]
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .for_each(|(i, chunk)| fill(i * CHUNK, chunk));
-    // SAFETY: the kernels write every element of every chunk.
-    unsafe { out.set_len(n) };
-    out
 }
 
 fn contiguous(t: &FlexTensor) -> FlexTensor {

@@ -1,9 +1,14 @@
-//! The one strided f32 GEMM that the hand-written Flex ops (dense layer, Gram matrix) share,
-//! and a tensor that a GEMM writes without zeroing it first.
+//! What the hand-written Flex ops share: one strided f32 GEMM (dense layer, Gram matrix),
+//! tensors written without zeroing them first, and parallel element-wise fills (sine,
+//! softplus).
 //!
 //! Flex's matmul zero-fills each output as bytes and then copies it to meet an alignment rule
 //! (`FlexTensor::empty`), and reads transposed operands through copies. These ops write each
 //! result once and read transposes through strides.
+
+use std::mem::MaybeUninit;
+
+use rayon::prelude::*;
 
 use burn::backend::TensorData;
 use burn::backend::flex::FlexTensor;
@@ -70,4 +75,20 @@ pub(crate) unsafe fn written<const D: usize>(
 /// The f32 values of a contiguous tensor.
 pub(crate) fn values(t: &FlexTensor) -> &[f32] {
     t.as_slice::<f32>().expect("contiguous f32")
+}
+
+/// Elements per parallel job of [`filled`].
+const CHUNK: usize = 1 << 14;
+
+/// A vector of `n` values that `fill` writes chunk by chunk (given each chunk's offset), in
+/// parallel, never zeroed first. `fill` must write every element of its chunk.
+pub(crate) fn filled(n: usize, fill: impl Fn(usize, &mut [MaybeUninit<f32>]) + Sync) -> Vec<f32> {
+    let mut out = Vec::with_capacity(n);
+    out.spare_capacity_mut()[..n]
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(i, chunk)| fill(i * CHUNK, chunk));
+    // SAFETY: `fill` writes every element of every chunk (its contract).
+    unsafe { out.set_len(n) };
+    out
 }
