@@ -9,6 +9,8 @@ use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
+use super::dense_op::dense;
+
 /// Configuration of an [`Amalgamation`].
 #[derive(Config, Debug)]
 pub struct AmalgamationConfig {
@@ -46,10 +48,10 @@ impl AmalgamationConfig {
 impl Amalgamation {
     /// `features [N, F]`, `style [N, S]` → `[N, F]`.
     pub fn forward(&self, features: Tensor<2>, style: Tensor<2>) -> Tensor<2> {
-        let mixed = relu(
-            self.fuse
-                .forward(Tensor::cat(vec![features.clone(), style], 1)),
-        );
+        let mixed = relu(dense(
+            &self.fuse,
+            Tensor::cat(vec![features.clone(), style], 1),
+        ));
         if !self.blend {
             return mixed;
         }

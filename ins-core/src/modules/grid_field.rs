@@ -5,6 +5,7 @@ use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
+use super::dense_op::dense;
 use super::hash_grid::{HashGrid, HashGridConfig};
 
 /// Configuration of a [`GridGeometry`].
@@ -68,7 +69,7 @@ impl GridGeometry {
     /// `x [N, 3]` → raw density `[N]` and features `[N, d_features]`.
     pub fn forward(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
         let h = self.grid.forward(self.normalize(x));
-        let out = self.out.forward(relu(self.hidden.forward(h)));
+        let out = dense(&self.out, relu(dense(&self.hidden, h)));
         let [n, w] = out.dims();
         let sigma = out.clone().slice([0..n, 0..1]).reshape([n]);
         (sigma, out.slice([0..n, 1..w]))

@@ -4,6 +4,8 @@ use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
+use super::dense_op::dense;
+
 /// Configuration of a [`ReluMlp`].
 #[derive(Config, Debug)]
 pub struct ReluMlpConfig {
@@ -56,7 +58,7 @@ impl ReluMlp {
             if i > 0 && Some(i) == self.skip_at {
                 h = Tensor::cat(vec![h, input.clone()], 1);
             }
-            h = relu(layer.forward(h));
+            h = relu(dense(layer, h));
         }
         h
     }
@@ -85,7 +87,7 @@ impl RgbMlp {
 
     /// `[N, d_input] → [N, 3]` in (0, 1).
     pub fn forward(&self, input: Tensor<2>) -> Tensor<2> {
-        burn::tensor::activation::sigmoid(self.rgb.forward(self.hidden.forward(input)))
+        burn::tensor::activation::sigmoid(dense(&self.rgb, self.hidden.forward(input)))
     }
 }
 

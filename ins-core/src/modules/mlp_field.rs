@@ -4,6 +4,7 @@
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 
+use super::dense_op::dense;
 use super::encoding::FourierEncoding;
 use super::mlp::{ReluMlp, ReluMlpConfig};
 
@@ -60,8 +61,8 @@ impl MlpGeometry {
             .forward(FourierEncoding::new(self.n_freqs).encode(x));
         let [n, _] = h.dims();
         (
-            self.sigma.forward(h.clone()).reshape([n]),
-            self.feature.forward(h),
+            dense(&self.sigma, h.clone()).reshape([n]),
+            dense(&self.feature, h),
         )
     }
 

@@ -5,6 +5,7 @@
 //!
 //! with λ and γ learnable and starting at 1, so the stylized field starts as the pretrained one.
 
+use super::dense_op::dense;
 use burn::module::Param;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
@@ -101,7 +102,7 @@ impl FeatureBlend {
         let fs = Tensor::cat(vec![features.clone(), style], 1);
         let last = self.layers.len() - 1;
         let f_s = self.layers.iter().enumerate().fold(fs, |h, (i, l)| {
-            let h = l.forward(h);
+            let h = dense(l, h);
             if i < last { relu(h) } else { h }
         });
         blend(self.gamma.val(), features, f_s)
@@ -125,7 +126,7 @@ impl RadianceAm {
         let [n, _] = features.dims();
         let fs = Tensor::cat(vec![features.clone(), style.clone()], 1);
         let d = &self.density;
-        let sigma_s = d.out.forward(relu(d.hidden.forward(fs))).reshape([n]);
+        let sigma_s = dense(&d.out, relu(dense(&d.hidden, fs))).reshape([n]);
         (
             blend(d.lambda.val(), sigma, sigma_s),
             self.feature.forward(features, style),

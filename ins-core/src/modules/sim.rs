@@ -3,6 +3,7 @@
 //! As in the authors' NeRF code the code can be concatenated at every layer and an encoded
 //! position can enter at layer 2, so that style features may vary over space.
 
+use super::dense_op::dense;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
@@ -87,7 +88,7 @@ impl Sim {
                     Tensor::cat(parts, 1)
                 };
             }
-            h = layer.forward(h);
+            h = dense(layer, h);
             if i < last {
                 h = relu(h);
             }
