@@ -7,8 +7,8 @@
 //! The computation: odd-shaped matrix products, and 3×3 / 1×1 / strided convolutions with the
 //! gradients of both their input and their weight, on flex, through Burn's conv2d and through
 //! `ins-conv`'s op (f32 engine, with and without its fused ReLU: its AMX engine is never picked
-//! on these CPUs); and the SIREN's `sin(ω·z)` op, whose AVX-512 path the emulated CPUs replace
-//! by the plain one.
+//! on these CPUs); the SIREN's `sin(ω·z)` op and the SDF networks' softplus and slope ops,
+//! whose AVX-512 paths the emulated CPUs replace by plain ones; and the Gram-matrix op.
 //!
 //! A test binary without the libtest harness (`harness = false`): run with the environment
 //! variable below, it is the child that computes and writes its numbers.
@@ -22,7 +22,9 @@ use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
 use ins_conv::Engine;
 use ins_conv::op::ConvParams;
+use ins_core::loss::gram_op::gram_flex;
 use ins_core::modules::sine_op::scaled_sin;
+use ins_core::modules::softplus_op::{softplus, softplus_slope};
 use ins_tests::{max_rel_diff, values};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -182,7 +184,50 @@ fn compute() -> Results {
         "sine_grad".into(),
         values(zt.grad(&grads).expect("sine gradient")),
     );
+    // Softplus (β = 100) and its slope on [-0.1, 0.1], values and gradients.
+    let u: Vec<f32> = z.iter().map(|v| v * 0.1).collect();
+    let ut = tensor(&u, [4099], &device).require_grad();
+    let sp = softplus(ut.clone(), 100.0);
+    let slope = softplus_slope(ut.clone(), 100.0);
+    let grads = (sp.clone() + slope.clone()).sum().backward();
+    out.insert("softplus".into(), values(sp));
+    out.insert(
+        "softplus_naive".into(),
+        u.iter()
+            .map(|v| (100.0 * v).exp().ln_1p() / 100.0)
+            .collect(),
+    );
+    out.insert("softplus_slope".into(), values(slope));
+    out.insert(
+        "softplus_slope_naive".into(),
+        u.iter().map(|v| 1.0 / (1.0 + (-100.0 * v).exp())).collect(),
+    );
+    out.insert(
+        "softplus_grad".into(),
+        values(ut.grad(&grads).expect("softplus gradient")),
+    );
+    // The Gram matrix of a [1, 19, 130] feature map and its gradient.
+    let (c, p) = (19, 130);
+    let f = random(&mut rng, c * p);
+    let ft = tensor(&f, [1, c, p], &device).require_grad();
+    let g = gram_flex(ft.clone(), 1.0 / (c * p) as f32);
+    let grads = (g.clone() * g.clone()).sum().backward();
+    out.insert("gram".into(), values(g));
+    let mut naive = naive_matmul(&f, &transpose(&f, c, p), c, p, c);
+    naive.iter_mut().for_each(|v| *v /= (c * p) as f32);
+    out.insert("gram_naive".into(), naive);
+    out.insert(
+        "gram_grad".into(),
+        values(ft.grad(&grads).expect("Gram gradient")),
+    );
     out
+}
+
+/// `[rows, cols]` → `[cols, rows]`.
+fn transpose(a: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+    (0..cols * rows)
+        .map(|i| a[(i % rows) * cols + i / rows])
+        .collect()
 }
 
 fn features() -> BTreeMap<String, bool> {
