@@ -53,8 +53,9 @@ pub fn run(device: &Device, backend: &str, steps: usize, precision: Precision) -
             let params = ConvParams {
                 stride: [1, 1],
                 padding: [1, 1],
-                engine: Engine::Bf16Amx,
+                engine: Engine::bf16_or_f32(),
                 relu: true,
+                reuse_kernel: true,
             };
             ins_conv::conv2d(x, w, Some(b), params)
         }

@@ -42,12 +42,14 @@ impl VggArgs {
         let precision = self.precision();
         match precision.effective() {
             Precision::F32 if precision == Precision::Bf16 => eprintln!(
-                "--precision bf16: this CPU (or {}) offers no AMX-BF16; VGG runs in f32",
-                ins_conv::amx::DISABLE_ENV
+                "--precision bf16: this CPU (or {}) offers neither AMX-BF16 nor AVX-512 BF16; \
+                 VGG runs in f32",
+                ins_conv::dpbf16::DISABLE_ENV
             ),
-            Precision::Bf16 => {
-                eprintln!("VGG convolutions in bf16 on AMX (--precision f32 for f32)")
-            }
+            Precision::Bf16 => eprintln!(
+                "VGG convolutions in {} (--precision f32 for f32)",
+                ins_conv::Engine::bf16_or_f32().describe()
+            ),
             Precision::F32 => {}
         }
         Ok(vgg.with_precision(precision))

@@ -286,11 +286,11 @@ fn two_styles_train_and_render_a_mix_and_a_strip() {
     assert_clean_failure(&o, "non-negative");
 }
 
-/// `--precision bf16` runs VGG on AMX where the CPU has it (features close to f32's, not
-/// equal), and with AMX forced off (`INS_DISABLE_AMX=1`, as on a CPU without it) says so and
-/// gives exactly the f32 features.
+/// `--precision bf16` runs VGG in bf16 where the CPU has AMX or AVX-512 BF16 (features close
+/// to f32's, not equal), and with both forced off (`INS_DISABLE_BF16=1`, as on a CPU without
+/// them) says so and gives exactly the f32 features.
 #[test]
-fn bf16_precision_runs_on_amx_or_falls_back_to_f32() {
+fn bf16_precision_runs_where_the_cpu_can_or_falls_back_to_f32() {
     let dir = tempfile::tempdir().unwrap();
     let img = dir.path().join("img.png");
     image::RgbImage::from_fn(48, 40, |x, y| {
@@ -298,14 +298,14 @@ fn bf16_precision_runs_on_amx_or_falls_back_to_f32() {
     })
     .save(&img)
     .unwrap();
-    let features = |precision: &str, amx_off: bool| {
-        let out = dir.path().join(format!("{precision}_{amx_off}"));
+    let features = |precision: &str, bf16_off: bool| {
+        let out = dir.path().join(format!("{precision}_{bf16_off}"));
         let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_ins-cli"));
         c.args(["vgg", "features", "--image", s(&img), "--out", s(&out)])
             .args(["--backend", "flex", "--precision", precision])
             .env("INS_NO_GPU", "1");
-        if amx_off {
-            c.env(ins_conv::amx::DISABLE_ENV, "1");
+        if bf16_off {
+            c.env(ins_conv::dpbf16::DISABLE_ENV, "1");
         }
         let o = ok(c.output().expect("running ins-cli"));
         let layer = std::fs::read(out.join("relu4_3.npy")).unwrap();
@@ -317,7 +317,7 @@ fn bf16_precision_runs_on_amx_or_falls_back_to_f32() {
     assert_eq!(off_layer, f32_layer, "the fallback is not f32");
     let (bf16_layer, msg) = features("bf16", false);
     if ins_conv::Precision::Bf16.effective() == ins_conv::Precision::Bf16 {
-        assert!(msg.contains("bf16 on AMX"), "{msg}");
+        assert!(msg.contains("VGG convolutions in bf16"), "{msg}");
         assert_ne!(bf16_layer, f32_layer, "bf16 gave f32's exact features");
         let read = |b: &[u8]| -> Vec<f32> {
             // .npy v1: magic (6), version (2), header length (u16 LE), header, data.

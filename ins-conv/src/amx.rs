@@ -13,11 +13,13 @@ use crate::bf16::{TILE, TILE_K};
 pub const DISABLE_ENV: &str = "INS_DISABLE_AMX";
 
 /// Whether the BF16 AMX kernel can run here: the CPU has AMX-TILE and AMX-BF16, the kernel
-/// granted this process the tile state, and [`DISABLE_ENV`] is not set. Checked once.
+/// granted this process the tile state, and neither [`DISABLE_ENV`] nor
+/// [`crate::dpbf16::DISABLE_ENV`] is set. Checked once.
 pub fn available() -> bool {
     static AVAILABLE: OnceLock<bool> = OnceLock::new();
     *AVAILABLE.get_or_init(|| {
-        let disabled = std::env::var(DISABLE_ENV).is_ok_and(|v| !v.is_empty() && v != "0");
+        let disabled = crate::dpbf16::env_flag(DISABLE_ENV)
+            || crate::dpbf16::env_flag(crate::dpbf16::DISABLE_ENV);
         !disabled && cpu_has_amx_bf16() && request_tile_state()
     })
 }

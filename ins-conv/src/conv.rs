@@ -10,6 +10,7 @@ use rayon::prelude::*;
 
 use crate::amx::{self, Tiles};
 use crate::bf16::{PackedLeft, TILE, TILE_K, pack_right, round_up};
+use crate::dpbf16;
 use crate::geometry::{ConvGeometry, Gather};
 use crate::im2col::{ImageSource, im2col};
 use crate::vnni_im2col::{UnitGather, im2col_vnni};
@@ -21,15 +22,87 @@ pub enum Engine {
     F32,
     /// BF16 inputs with f32 sums on AMX tiles. Only where [`amx::available`] holds.
     Bf16Amx,
+    /// BF16 inputs with f32 sums by AVX-512 BF16 dot products. Only where
+    /// [`dpbf16::available`] holds.
+    Bf16Avx512,
 }
 
 impl Engine {
-    /// `Bf16Amx` where the CPU and OS allow it, else `F32`.
-    pub fn bf16_or_f32() -> Self {
+    /// The fastest BF16 engine this CPU runs (AMX, then AVX-512 BF16), if any.
+    pub fn bf16() -> Option<Self> {
         if amx::available() {
-            Engine::Bf16Amx
+            Some(Engine::Bf16Amx)
+        } else if dpbf16::available() {
+            Some(Engine::Bf16Avx512)
         } else {
-            Engine::F32
+            None
+        }
+    }
+
+    /// [`Engine::bf16`], else `F32`.
+    pub fn bf16_or_f32() -> Self {
+        Self::bf16().unwrap_or(Engine::F32)
+    }
+
+    /// Every engine this CPU runs (for tests and benchmarks).
+    pub fn available() -> Vec<Self> {
+        let mut engines = vec![Engine::F32];
+        if amx::available() {
+            engines.push(Engine::Bf16Amx);
+        }
+        if dpbf16::available() {
+            engines.push(Engine::Bf16Avx512);
+        }
+        engines
+    }
+
+    /// Where this engine computes, for messages.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Engine::F32 => "f32",
+            Engine::Bf16Amx => "bf16 on AMX",
+            Engine::Bf16Avx512 => "bf16 with AVX-512 BF16",
+        }
+    }
+}
+
+/// The BF16 32×32 block of an engine, ready on this thread.
+enum Bf16Block {
+    Amx(Tiles),
+    Avx512,
+}
+
+impl Bf16Block {
+    fn new(engine: Engine) -> Self {
+        match engine {
+            Engine::Bf16Amx => Bf16Block::Amx(Tiles::configure()),
+            Engine::Bf16Avx512 => {
+                assert!(dpbf16::available(), "AVX-512 BF16 is not available");
+                Bf16Block::Avx512
+            }
+            Engine::F32 => unreachable!("f32 has no BF16 block"),
+        }
+    }
+
+    /// See [`Tiles::block_32x32`].
+    ///
+    /// # Safety
+    /// As there.
+    unsafe fn block_32x32(
+        &mut self,
+        a: [&[u16]; 2],
+        b: [&[u16]; 2],
+        kblocks: usize,
+        init: [&[f32; 256]; 2],
+        c: *mut f32,
+        c_stride: usize,
+    ) {
+        // SAFETY: the engine is available (checked in `new`); the rest is the caller's.
+        unsafe {
+            match self {
+                Bf16Block::Amx(tiles) => tiles.block_32x32(a, b, kblocks, init, c, c_stride),
+                Bf16Block::Avx512 => dpbf16::block_32x32(a, b, kblocks, init, c, c_stride),
+            }
         }
     }
 }
@@ -60,6 +133,61 @@ struct Shared(*mut f32);
 unsafe impl Send for Shared {}
 unsafe impl Sync for Shared {}
 
+/// A convolution's kernel as the left operand of its GEMM, in the layout its engine reads.
+/// Building it costs a pass over the weights (a BF16 packing, a flip for the input gradient);
+/// a frozen network's can be built once and kept (see `op`).
+pub enum KernelMatrix {
+    /// Row-major f32 `[m, k]` (gemm).
+    F32(Vec<f32>),
+    /// BF16 tiles, for a BF16 engine.
+    Bf16(PackedLeft, Engine),
+}
+
+/// A kernel matrix, borrowed: the f32 forward reads the weights as they are.
+#[derive(Clone, Copy)]
+enum Left<'a> {
+    F32(&'a [f32]),
+    Bf16(&'a PackedLeft, Engine),
+}
+
+impl KernelMatrix {
+    /// The forward's left operand: `w` as `[c_out, c_in · kh · kw]`.
+    pub fn forward(w: &[f32], g: &ConvGeometry, engine: Engine) -> Self {
+        match engine {
+            Engine::F32 => KernelMatrix::F32(w.to_vec()),
+            bf16 => KernelMatrix::Bf16(PackedLeft::new(w, g.c_out, g.taps()), bf16),
+        }
+    }
+
+    /// The input gradient's left operand: the flipped kernel with its channels swapped,
+    /// `[c_in, c_out · kh · kw]`.
+    pub fn input_grad(w: &[f32], g: &ConvGeometry, engine: Engine) -> Self {
+        let flipped = flipped_kernel(w, g);
+        match engine {
+            Engine::F32 => KernelMatrix::F32(flipped),
+            bf16 => {
+                let k = g.c_out * g.kernel[0] * g.kernel[1];
+                KernelMatrix::Bf16(PackedLeft::new(&flipped, g.c_in, k), bf16)
+            }
+        }
+    }
+
+    /// The engine that reads it.
+    pub fn engine(&self) -> Engine {
+        match self {
+            KernelMatrix::F32(_) => Engine::F32,
+            KernelMatrix::Bf16(_, engine) => *engine,
+        }
+    }
+
+    fn left(&self) -> Left<'_> {
+        match self {
+            KernelMatrix::F32(v) => Left::F32(v),
+            KernelMatrix::Bf16(p, engine) => Left::Bf16(p, *engine),
+        }
+    }
+}
+
 /// The common routine: `out[b, m, p] = Σ_k left[m, k] · cols_b[k, p] (+ bias[m])`, where
 /// `cols_b` is im2col of image `b` of `src` (`[batch, channels, h, w]`) through `gather`.
 #[allow(clippy::too_many_arguments)]
@@ -69,11 +197,10 @@ fn conv_gemm(
     kernel: [usize; 2],
     gather: [Gather; 2],
     out_hw: [usize; 2],
-    left: &[f32],
+    left: Left<'_>,
     m: usize,
     bias: Option<&[f32]>,
     relu: bool,
-    engine: Engine,
 ) -> Vec<f32> {
     let channels = src.channels;
     let k = channels * kernel[0] * kernel[1];
@@ -86,7 +213,19 @@ fn conv_gemm(
     let len = batch * m * pixels;
     let mut out = Vec::<f32>::with_capacity(len);
     let dst = Shared(out.as_mut_ptr());
-    let packed = (engine == Engine::Bf16Amx).then(|| PackedLeft::new(left, m, k));
+    let (left, packed) = match left {
+        Left::F32(a) => {
+            assert_eq!(a.len(), m * k, "kernel matrix of the wrong size");
+            (a, None)
+        }
+        Left::Bf16(p, engine) => {
+            assert!(
+                p.m >= m && p.k == round_up(k, TILE_K),
+                "packed kernel of the wrong size"
+            );
+            (&[][..], Some((p, engine)))
+        }
+    };
     let job = |cols: &mut Vec<f32>, vnni: &mut Vec<u16>, b: usize, c: usize| {
         let dst = dst;
         let p0 = c * chunk;
@@ -121,10 +260,10 @@ fn conv_gemm(
                     gemm::Parallelism::None,
                 );
             },
-            Some(a) => {
+            Some((a, engine)) => {
                 let n_pad = round_up(n, 2 * TILE);
                 match (gather[0].unit_offset(), gather[1].unit_offset()) {
-                    // SAFETY: AMX-BF16 (this engine) implies AVX-512 F/BW/BF16.
+                    // SAFETY: both BF16 engines imply AVX-512 F/BW/BF16.
                     (Some(oy), Some(ox)) => unsafe {
                         let unit = UnitGather { offset: [oy, ox] };
                         im2col_vnni(src, kernel, unit, out_hw[1], p0, n, n_pad, vnni)
@@ -137,7 +276,7 @@ fn conv_gemm(
                 }
                 let kblocks = a.k / TILE_K;
                 let b_len = kblocks * TILE * TILE_K;
-                let mut tiles = Tiles::configure();
+                let mut tiles = Bf16Block::new(*engine);
                 let mut block = [0.0f32; 1024];
                 for mb in (0..a.m / TILE).step_by(2) {
                     let rows = [a.row_block(mb), a.row_block(mb + 1)];
@@ -220,6 +359,33 @@ pub fn forward(
     relu: bool,
     engine: Engine,
 ) -> Vec<f32> {
+    match engine {
+        Engine::F32 => forward_from(x, Left::F32(w), bias, g, relu),
+        bf16 => {
+            let kernel = KernelMatrix::forward(w, g, bf16);
+            forward_with(x, &kernel, bias, g, relu)
+        }
+    }
+}
+
+/// [`forward`] with the kernel already in its GEMM layout ([`KernelMatrix::forward`]).
+pub fn forward_with(
+    x: &[f32],
+    kernel: &KernelMatrix,
+    bias: Option<&[f32]>,
+    g: &ConvGeometry,
+    relu: bool,
+) -> Vec<f32> {
+    forward_from(x, kernel.left(), bias, g, relu)
+}
+
+fn forward_from(
+    x: &[f32],
+    left: Left<'_>,
+    bias: Option<&[f32]>,
+    g: &ConvGeometry,
+    relu: bool,
+) -> Vec<f32> {
     let src = ImageSource::new(x, g.c_in, g.input);
     let gather = Gather::forward(g);
     conv_gemm(
@@ -228,26 +394,17 @@ pub fn forward(
         g.kernel,
         gather,
         g.out_hw(),
-        w,
+        left,
         g.c_out,
         bias,
         relu,
-        engine,
     )
 }
 
-/// `∂L/∂x [batch, c_in, h, w]` from `∂L/∂y [batch, c_out, ho, wo]`; with `relu_out` (the
-/// output of a fused ReLU), from `∂L/∂y` where that output is positive.
-pub fn input_grad(
-    grad_out: &[f32],
-    relu_out: Option<&[f32]>,
-    w: &[f32],
-    g: &ConvGeometry,
-    engine: Engine,
-) -> Vec<f32> {
-    let [kh, kw] = g.kernel;
-    // The flipped kernel with its channels swapped: [c_in, c_out · kh · kw].
-    let taps = kh * kw;
+/// The flipped kernel with its channels swapped, `[c_in, c_out · kh · kw]`: the input gradient
+/// is the convolution of the output gradient with it.
+fn flipped_kernel(w: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    let taps = g.kernel[0] * g.kernel[1];
     let mut left = vec![0.0f32; g.c_in * g.c_out * taps];
     left.par_chunks_mut(g.c_out * taps)
         .enumerate()
@@ -260,6 +417,29 @@ pub fn input_grad(
                     .for_each(|(d, &v)| *d = v);
             }
         });
+    left
+}
+
+/// `∂L/∂x [batch, c_in, h, w]` from `∂L/∂y [batch, c_out, ho, wo]`; with `relu_out` (the
+/// output of a fused ReLU), from `∂L/∂y` where that output is positive.
+pub fn input_grad(
+    grad_out: &[f32],
+    relu_out: Option<&[f32]>,
+    w: &[f32],
+    g: &ConvGeometry,
+    engine: Engine,
+) -> Vec<f32> {
+    let kernel = KernelMatrix::input_grad(w, g, engine);
+    input_grad_with(grad_out, relu_out, &kernel, g)
+}
+
+/// [`input_grad`] with the kernel already in its GEMM layout ([`KernelMatrix::input_grad`]).
+pub fn input_grad_with(
+    grad_out: &[f32],
+    relu_out: Option<&[f32]>,
+    kernel: &KernelMatrix,
+    g: &ConvGeometry,
+) -> Vec<f32> {
     let t = g.transposed();
     let src = ImageSource {
         gate: relu_out,
@@ -267,7 +447,15 @@ pub fn input_grad(
     };
     let gather = Gather::transposed(g);
     conv_gemm(
-        src, g.batch, g.kernel, gather, g.input, &left, g.c_in, None, false, engine,
+        src,
+        g.batch,
+        g.kernel,
+        gather,
+        g.input,
+        kernel.left(),
+        g.c_in,
+        None,
+        false,
     )
 }
 
@@ -442,29 +630,46 @@ mod tests {
         }
     }
 
-    /// AMX multiplies the bf16-rounded inputs exactly and sums in f32: against the plain loops
-    /// on rounded inputs it agrees to f32 summation error; against the f32 result, to bf16's.
+    /// Both BF16 engines multiply the bf16-rounded inputs exactly and sum in f32: against the
+    /// plain loops on rounded inputs they agree to f32 summation error; against the f32 result,
+    /// to bf16's. Where the CPU has neither, what must hold is that neither is chosen.
     #[test]
-    fn amx_forward_and_input_gradient_are_exact_products_of_rounded_inputs() {
-        if !amx::available() {
-            // The engine cannot be asked for here; what must hold is that it is not chosen.
-            assert_eq!(Engine::bf16_or_f32(), Engine::F32);
-            eprintln!("AMX not available: only the fallback choice was checked");
-            return;
+    fn bf16_forward_and_input_gradient_are_exact_products_of_rounded_inputs() {
+        let engines: Vec<_> = Engine::available()
+            .into_iter()
+            .filter(|&e| e != Engine::F32)
+            .collect();
+        let preferred = if amx::available() {
+            Engine::Bf16Amx
+        } else if dpbf16::available() {
+            Engine::Bf16Avx512
+        } else {
+            Engine::F32
+        };
+        assert_eq!(Engine::bf16_or_f32(), preferred);
+        if engines.is_empty() {
+            eprintln!("no BF16 engine on this CPU: only the fallback choice was checked");
         }
-        assert_eq!(Engine::bf16_or_f32(), Engine::Bf16Amx);
-        for (i, g) in geometries().into_iter().enumerate() {
-            let (x, w, b, go) = operands(&g, i as u64);
-            let y = forward(&x, &w, Some(&b), &g, false, Engine::Bf16Amx);
-            let exact = reference::forward(&rounded(&x), &rounded(&w), Some(&b), &g);
-            assert!(worst(&y, &exact, 1.0) < 1e-4, "rounded {g:?}");
-            let full = reference::forward(&x, &w, Some(&b), &g);
-            let scale = (g.taps() as f32).sqrt();
-            let err = worst(&y, &full, scale);
-            assert!(err < 1e-2 && err > 0.0, "bf16 vs f32 {err} {g:?}");
-            let dx = input_grad(&go, None, &w, &g, Engine::Bf16Amx);
-            let exact_dx = reference::input_grad(&rounded(&w), &rounded(&go), &g);
-            assert!(worst(&dx, &exact_dx, 1.0) < 1e-4, "dx rounded {g:?}");
+        for engine in engines {
+            for (i, g) in geometries().into_iter().enumerate() {
+                let (x, w, b, go) = operands(&g, i as u64);
+                let y = forward(&x, &w, Some(&b), &g, false, engine);
+                let exact = reference::forward(&rounded(&x), &rounded(&w), Some(&b), &g);
+                assert!(worst(&y, &exact, 1.0) < 1e-4, "{engine:?} rounded {g:?}");
+                let full = reference::forward(&x, &w, Some(&b), &g);
+                let scale = (g.taps() as f32).sqrt();
+                let err = worst(&y, &full, scale);
+                assert!(
+                    err < 1e-2 && err > 0.0,
+                    "{engine:?} bf16 vs f32 {err} {g:?}"
+                );
+                let dx = input_grad(&go, None, &w, &g, engine);
+                let exact_dx = reference::input_grad(&rounded(&w), &rounded(&go), &g);
+                assert!(
+                    worst(&dx, &exact_dx, 1.0) < 1e-4,
+                    "{engine:?} dx rounded {g:?}"
+                );
+            }
         }
     }
 }

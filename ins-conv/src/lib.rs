@@ -1,6 +1,6 @@
 //! 2D convolution for the CPU as a Burn op with its own backward: im2col over chunks of pixels
-//! and one GEMM per chunk, in f32 or, where the CPU has Intel AMX, with BF16 inputs and f32 sums
-//! on the tile registers.
+//! and one GEMM per chunk, in f32 or with BF16 inputs and f32 sums, on Intel AMX's tile
+//! registers or by AVX-512 BF16 dot products, whichever the CPU has.
 //!
 //! VGG-16 runs every stylization step of every variant; this op is its convolution when
 //! `--precision bf16` is asked for (see `vgg-import`).
@@ -8,8 +8,10 @@
 pub mod amx;
 pub mod bf16;
 pub mod conv;
+pub mod dpbf16;
 pub mod geometry;
 pub mod im2col;
+pub mod kernel_cache;
 pub mod op;
 pub mod reference;
 pub mod vnni_im2col;
@@ -24,15 +26,16 @@ pub enum Precision {
     /// f32 throughout.
     #[default]
     F32,
-    /// BF16 inputs and f32 sums on AMX where the CPU has it; f32 elsewhere.
+    /// BF16 inputs and f32 sums, on AMX or with AVX-512 BF16 where the CPU has either; f32
+    /// elsewhere.
     Bf16,
 }
 
 impl Precision {
-    /// What actually runs on this CPU: `Bf16` only where AMX is available.
+    /// What actually runs on this CPU: `Bf16` only where a BF16 engine is available.
     pub fn effective(self) -> Precision {
         match self {
-            Precision::Bf16 if amx::available() => Precision::Bf16,
+            Precision::Bf16 if Engine::bf16().is_some() => Precision::Bf16,
             _ => Precision::F32,
         }
     }

@@ -16,8 +16,9 @@ use burn::backend::{
 };
 use burn::prelude::*;
 
-use crate::conv::{self, Engine};
+use crate::conv::{self, Engine, KernelMatrix};
 use crate::geometry::ConvGeometry;
+use crate::kernel_cache::{self, Role};
 
 /// Stride, padding and engine of one convolution (the rest comes from the tensors' shapes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -30,6 +31,9 @@ pub struct ConvParams {
     pub engine: Engine,
     /// A ReLU fused after the convolution (and its mask fused into the input gradient).
     pub relu: bool,
+    /// The kernel is constant (a frozen network's): keep its GEMM layout between calls (see
+    /// [`crate::kernel_cache`]). Autodiff ignores it where the kernel is tracked.
+    pub reuse_kernel: bool,
 }
 
 impl ConvParams {
@@ -124,6 +128,26 @@ fn values<R>(t: &FlexTensor, f: impl FnOnce(&[f32]) -> R) -> R {
     f(t.as_slice::<f32>().expect("contiguous f32"))
 }
 
+/// The kernel matrix of `weight` for `role`: kept between calls when `params` allow it.
+fn kernel_matrix(
+    weight: &FlexTensor,
+    g: &ConvGeometry,
+    role: Role,
+    params: ConvParams,
+) -> std::sync::Arc<KernelMatrix> {
+    let build = || {
+        values(weight, |w| match role {
+            Role::Forward => KernelMatrix::forward(w, g, params.engine),
+            Role::InputGrad => KernelMatrix::input_grad(w, g, params.engine),
+        })
+    };
+    if params.reuse_kernel {
+        kernel_cache::kernel_matrix(weight, role, params.engine, build)
+    } else {
+        std::sync::Arc::new(build())
+    }
+}
+
 fn tensor(values: Vec<f32>, shape: [usize; 4]) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, shape))
 }
@@ -136,13 +160,23 @@ impl ConvOps for Flex {
         params: ConvParams,
     ) -> FlexTensor {
         let g = params.geometry(&x, &weight);
-        let y = values(&x, |x| {
-            values(&weight, |w| {
-                values(&bias, |b| {
-                    conv::forward(x, w, Some(b), &g, params.relu, params.engine)
+        let y = if params.engine == Engine::F32 {
+            // The f32 forward reads the weights as they are: nothing to build or keep.
+            values(&x, |x| {
+                values(&weight, |w| {
+                    values(&bias, |b| {
+                        conv::forward(x, w, Some(b), &g, params.relu, params.engine)
+                    })
                 })
             })
-        });
+        } else {
+            let kernel = kernel_matrix(&weight, &g, Role::Forward, params);
+            values(&x, |x| {
+                values(&bias, |b| {
+                    conv::forward_with(x, &kernel, Some(b), &g, params.relu)
+                })
+            })
+        };
         let [ho, wo] = g.out_hw();
         tensor(y, [g.batch, g.c_out, ho, wo])
     }
@@ -154,11 +188,8 @@ impl ConvOps for Flex {
         params: ConvParams,
     ) -> FlexTensor {
         let g = params.backward_geometry(&grad_out, &weight, input_hw);
-        let dx = values(&grad_out, |go| {
-            values(&weight, |w| {
-                conv::input_grad(go, None, w, &g, params.engine)
-            })
-        });
+        let kernel = kernel_matrix(&weight, &g, Role::InputGrad, params);
+        let dx = values(&grad_out, |go| conv::input_grad_with(go, None, &kernel, &g));
         tensor(dx, [g.batch, g.c_in, input_hw[0], input_hw[1]])
     }
 
@@ -170,11 +201,10 @@ impl ConvOps for Flex {
         params: ConvParams,
     ) -> FlexTensor {
         let g = params.backward_geometry(&grad_out, &weight, input_hw);
+        let kernel = kernel_matrix(&weight, &g, Role::InputGrad, params);
         let dx = values(&grad_out, |go| {
             values(&relu_out, |y| {
-                values(&weight, |w| {
-                    conv::input_grad(go, Some(y), w, &g, params.engine)
-                })
+                conv::input_grad_with(go, Some(y), &kernel, &g)
             })
         });
         tensor(dx, [g.batch, g.c_in, input_hw[0], input_hw[1]])
@@ -262,6 +292,11 @@ impl<B: Backend + ConvOps, C: CheckpointStrategy> ConvOps for Autodiff<B, C> {
         bias: FloatTensor<Self>,
         params: ConvParams,
     ) -> FloatTensor<Self> {
+        // A kernel that learns changes every step: keeping its matrices would only pin memory.
+        let params = ConvParams {
+            reuse_kernel: params.reuse_kernel && !weight.is_tracked(),
+            ..params
+        };
         match ConvBackward
             .prepare::<C>([x.node(), weight.node(), bias.node()])
             .compute_bound()
@@ -387,10 +422,11 @@ mod tests {
             ([1, 5, 6, 11], [4, 5, 1, 1], [1, 1], [0, 0]),
             ([2, 6, 10, 9], [17, 6, 3, 2], [2, 3], [1, 0]),
         ];
-        let mut engines = vec![(Engine::F32, 1e-5)];
-        if crate::amx::available() {
-            engines.push((Engine::Bf16Amx, 2e-2));
-        }
+        let tol = |e: Engine| if e == Engine::F32 { 1e-5 } else { 2e-2 };
+        let engines: Vec<_> = Engine::available()
+            .into_iter()
+            .map(|e| (e, tol(e)))
+            .collect();
         for (engine, tol) in engines {
             for ((xs, ws, stride, padding), relu) in
                 cases.iter().flat_map(|c| [(*c, false), (*c, true)])
@@ -398,11 +434,13 @@ mod tests {
                 let x = Tensor::<4>::random(xs, Distribution::Default, &d).require_grad();
                 let w = Tensor::<4>::random(ws, Distribution::Normal(0.0, 0.3), &d).require_grad();
                 let b = Tensor::<1>::random([ws[0]], Distribution::Default, &d).require_grad();
+                // Tracked weights: autodiff must ignore `reuse_kernel`.
                 let params = ConvParams {
                     stride,
                     padding,
                     engine,
                     relu,
+                    reuse_kernel: true,
                 };
                 let y = conv2d(x.clone(), w.clone(), Some(b.clone()), params);
                 let opts = ConvOptions::new(stride, padding, [1, 1], 1);
@@ -455,9 +493,68 @@ mod tests {
             padding: [1, 1],
             engine: Engine::F32,
             relu: true,
+            reuse_kernel: false,
         };
         let g = conv2d(x.clone(), w.clone(), None, params).sum().backward();
         assert!(x.grad(&g).is_some());
         assert!(w.grad(&g).is_none());
+    }
+
+    /// A frozen kernel's matrices are built once, and a kernel changed afterwards, even by an
+    /// op that could write in place, is never served its old matrices.
+    #[test]
+    fn frozen_kernels_are_built_once_and_never_stale() {
+        let d = Device::flex().autodiff();
+        d.seed(5);
+        // The BF16 forward keeps a matrix too; the f32 one reads the weights as they are.
+        let engines = Engine::available().into_iter().map(|e| match e {
+            Engine::F32 => (e, 1e-5, 1),
+            _ => (e, 2e-2, 2),
+        });
+        for (engine, tol, per_kernel) in engines {
+            let params = ConvParams {
+                stride: [1, 1],
+                padding: [1, 1],
+                engine,
+                relu: false,
+                reuse_kernel: true,
+            };
+            let x = Tensor::<4>::random([1, 5, 9, 7], Distribution::Default, &d).require_grad();
+            let probe = Tensor::<4>::random([1, 6, 9, 7], Distribution::Default, &d);
+            // Value and input gradient against Burn's conv2d.
+            let check = |w: Tensor<4>, what: &str| {
+                let y = conv2d(x.clone(), w.clone(), None, params);
+                let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+                let y_ref = burn_conv2d(x.clone(), w, None, opts);
+                close(y.clone(), y_ref.clone(), tol, &format!("y {what}"));
+                let g = (y * probe.clone()).sum().backward();
+                let g_ref = (y_ref * probe.clone()).sum().backward();
+                let (dx, dx_ref) = (x.grad(&g).unwrap(), x.grad(&g_ref).unwrap());
+                close(dx, dx_ref, tol, &format!("dx {what}"));
+            };
+            let w = Tensor::<4>::random([6, 5, 3, 3], Distribution::Normal(0.0, 0.3), &d);
+            let before = crate::kernel_cache::built();
+            check(w.clone(), &format!("{engine:?} first call"));
+            assert_eq!(
+                crate::kernel_cache::built() - before,
+                per_kernel,
+                "{engine:?}"
+            );
+            check(w.clone(), &format!("{engine:?} second call"));
+            assert_eq!(
+                crate::kernel_cache::built() - before,
+                per_kernel,
+                "{engine:?}: the second call rebuilt the kernel matrices"
+            );
+            // `w` is this test's only handle: an in-place add would reuse its storage, but the
+            // cache holds it too, so Flex copies, and the new values get new matrices.
+            let changed = w.add_scalar(1.0);
+            check(changed, &format!("{engine:?} changed kernel"));
+            assert_eq!(
+                crate::kernel_cache::built() - before,
+                2 * per_kernel,
+                "{engine:?}"
+            );
+        }
     }
 }

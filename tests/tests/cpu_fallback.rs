@@ -153,6 +153,7 @@ fn compute() -> Results {
                 padding: [pad; 2],
                 engine: Engine::F32,
                 relu,
+                reuse_kernel: false,
             };
             let y = ins_conv::conv2d(xt.clone(), wt.clone(), None, params);
             let up = random(&mut rng, y.shape().num_elements());

@@ -99,10 +99,11 @@ impl Vgg16Features {
     /// The AMX engine when BF16 is asked for and can run on `device`; `None` means Burn's own
     /// f32 convolution.
     fn bf16_engine(&self, device: &Device) -> Option<Engine> {
-        (self.precision == Precision::Bf16
-            && ins_conv::amx::available()
-            && ins_conv::kernel_device(device))
-        .then_some(Engine::Bf16Amx)
+        if self.precision == Precision::Bf16 && ins_conv::kernel_device(device) {
+            Engine::bf16()
+        } else {
+            None
+        }
     }
 
     /// Runs a preprocessed `[B, 3, H, W]` batch to relu4_3.
@@ -120,6 +121,8 @@ impl Vgg16Features {
                         padding: [1, 1],
                         engine,
                         relu: true,
+                        // VGG is frozen.
+                        reuse_kernel: true,
                     };
                     ins_conv::conv2d(x, w, b, params)
                 }
