@@ -33,8 +33,8 @@ pub struct BenchArgs {
     /// Timed steps (after one warm-up step); the median is reported.
     #[arg(long, default_value_t = 5)]
     steps: usize,
-    /// Arithmetic of the VGG convolutions: f32, or bf16 (AMX; f32 where the CPU lacks it).
-    /// Default: bf16 where the CPU has AMX-BF16, as in training.
+    /// Arithmetic of the VGG convolutions: f32, or bf16 (AMX or AVX-512 BF16; f32 where the
+    /// CPU has neither). Default: bf16 where the CPU can, as in training.
     #[arg(long)]
     precision: Option<Precision>,
 }

@@ -46,7 +46,7 @@ fn time(steps: usize, mut f: impl FnMut()) -> f64 {
 pub fn run(device: &Device, backend: &str, steps: usize, precision: Precision) -> Result<()> {
     let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
     let precision = precision.effective();
-    // conv + ReLU as VGG runs it at this precision: Burn's conv2d in f32, the fused op on AMX.
+    // conv + ReLU as VGG runs it at this precision: Burn's conv2d in f32, the fused op in bf16.
     let conv_relu = |x: Tensor<4>, w: Tensor<4>, b: Tensor<1>| match precision {
         Precision::F32 => relu(conv2d(x, w, Some(b), opts.clone())),
         Precision::Bf16 => {

@@ -24,7 +24,8 @@ pub struct VggArgs {
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
     /// Arithmetic of the VGG convolutions: f32, or bf16 (BF16 products with f32 sums on Intel
-    /// AMX, f32 on CPUs without it). Default: bf16 where the CPU has AMX-BF16, else f32.
+    /// AMX or by AVX-512 BF16, f32 on CPUs with neither). Default: bf16 where the CPU has
+    /// either, else f32.
     #[arg(long, value_name = "P")]
     pub precision: Option<Precision>,
 }

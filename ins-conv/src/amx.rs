@@ -7,7 +7,7 @@
 
 use std::sync::OnceLock;
 
-use crate::bf16::{TILE, TILE_K};
+use crate::bf16::{Block32, TILE, TILE_K};
 
 /// Set (to anything but `0`) to keep AMX off even where the CPU has it.
 pub const DISABLE_ENV: &str = "INS_DISABLE_AMX";
@@ -90,26 +90,19 @@ impl Tiles {
         Tiles(())
     }
 
-    /// `c` (32×32 f32, `c_stride` floats between rows) = `init` + rows `a0` (16) and `a1`
-    /// (16) times columns `b0` (16) and `b1` (16), each a run of `kblocks` tiles as laid out by
-    /// [`crate::bf16`]. `init[i]` (16×16, row-major) starts both column halves of row half `i`
-    /// (the bias, broadcast along a row).
+    /// `c` (32×32 f32, `c_stride` floats between rows) = the product block `ops` describes.
     ///
     /// # Safety
     /// `c` must be valid for writes of 32 rows of 32 floats, `c_stride` floats apart.
-    pub unsafe fn block_32x32(
-        &mut self,
-        a: [&[u16]; 2],
-        b: [&[u16]; 2],
-        kblocks: usize,
-        init: [&[f32; 256]; 2],
-        c: *mut f32,
-        c_stride: usize,
-    ) {
+    pub unsafe fn block_32x32(&mut self, ops: &Block32, c: *mut f32, c_stride: usize) {
+        ops.check();
+        let Block32 {
+            a,
+            b,
+            kblocks,
+            init,
+        } = *ops;
         let tile = TILE * TILE_K;
-        for s in a.iter().chain(b.iter()) {
-            assert!(s.len() >= kblocks * tile, "short tile run");
-        }
         // SAFETY: the tiles are configured (`self` exists); every load reads 16 rows of 64
         // bytes inside a slice checked above (or `init`); the stores are the caller's promise.
         unsafe {

@@ -1,4 +1,4 @@
-//! BF16 values and the tile layouts AMX reads: the left matrix as 16×32 tiles of rows, the right
+//! BF16 values and the tile layouts both BF16 engines read (AMX, AVX-512 BF16): the left matrix as 16×32 tiles of rows, the right
 //! matrix in the VNNI layout (pairs of consecutive `k` side by side), both zero-padded to whole
 //! tiles.
 
@@ -86,6 +86,30 @@ pub fn pack_right(b: &[f32], k: usize, n: usize, n_pad: usize, out: &mut Vec<u16
                 tile[2 * j] = to_bf16(row0[col]);
                 tile[2 * j + 1] = row1.map_or(0, |r| to_bf16(r[col]));
             }
+        }
+    }
+}
+
+/// The operands of one 32×32 output block, for either BF16 engine: rows `a[0]` (16) and `a[1]`
+/// (16) of the left matrix times columns `b[0]` (16) and `b[1]` (16) of the right one, each a
+/// run of `kblocks` tiles as laid out above; `init[i]` (16×16, row-major) starts both column
+/// halves of row half `i` (the bias, broadcast along a row).
+pub struct Block32<'a> {
+    /// Two runs of left tiles (16 rows each).
+    pub a: [&'a [u16]; 2],
+    /// Two runs of right VNNI tiles (16 columns each).
+    pub b: [&'a [u16]; 2],
+    /// Tiles per run (`k / 32`).
+    pub kblocks: usize,
+    /// Starting values of the two row halves.
+    pub init: [&'a [f32; 256]; 2],
+}
+
+impl Block32<'_> {
+    /// Panics unless every run holds `kblocks` whole tiles.
+    pub fn check(&self) {
+        for s in self.a.iter().chain(self.b.iter()) {
+            assert!(s.len() >= self.kblocks * TILE * TILE_K, "short tile run");
         }
     }
 }

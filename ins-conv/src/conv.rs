@@ -9,7 +9,7 @@
 use rayon::prelude::*;
 
 use crate::amx::{self, Tiles};
-use crate::bf16::{PackedLeft, TILE, TILE_K, pack_right, round_up};
+use crate::bf16::{Block32, PackedLeft, TILE, TILE_K, pack_right, round_up};
 use crate::dpbf16;
 use crate::geometry::{ConvGeometry, Gather};
 use crate::im2col::{ImageSource, im2col};
@@ -88,20 +88,12 @@ impl Bf16Block {
     ///
     /// # Safety
     /// As there.
-    unsafe fn block_32x32(
-        &mut self,
-        a: [&[u16]; 2],
-        b: [&[u16]; 2],
-        kblocks: usize,
-        init: [&[f32; 256]; 2],
-        c: *mut f32,
-        c_stride: usize,
-    ) {
+    unsafe fn block_32x32(&mut self, ops: &Block32, c: *mut f32, c_stride: usize) {
         // SAFETY: the engine is available (checked in `new`); the rest is the caller's.
         unsafe {
             match self {
-                Bf16Block::Amx(tiles) => tiles.block_32x32(a, b, kblocks, init, c, c_stride),
-                Bf16Block::Avx512 => dpbf16::block_32x32(a, b, kblocks, init, c, c_stride),
+                Bf16Block::Amx(tiles) => tiles.block_32x32(ops, c, c_stride),
+                Bf16Block::Avx512 => dpbf16::block_32x32(ops, c, c_stride),
             }
         }
     }
@@ -283,39 +275,24 @@ fn conv_gemm(
                     let r0 = mb * TILE;
                     let init = [bias_tile(bias, r0, m), bias_tile(bias, r0 + TILE, m)];
                     for nb in (0..n_pad / TILE).step_by(2) {
-                        let cols_b = [
-                            &vnni[nb * b_len..][..b_len],
-                            &vnni[(nb + 1) * b_len..][..b_len],
-                        ];
+                        let ops = Block32 {
+                            a: rows,
+                            b: [
+                                &vnni[nb * b_len..][..b_len],
+                                &vnni[(nb + 1) * b_len..][..b_len],
+                            ],
+                            kblocks,
+                            init: [&init[0], &init[1]],
+                        };
                         let c0 = nb * TILE;
                         if r0 + 2 * TILE <= m && c0 + 2 * TILE <= n {
                             // SAFETY: rows r0 .. r0 + 32 < m, columns c0 .. c0 + 32 ≤ n.
-                            unsafe {
-                                let c = out_at(r0, c0);
-                                tiles.block_32x32(
-                                    rows,
-                                    cols_b,
-                                    kblocks,
-                                    [&init[0], &init[1]],
-                                    c,
-                                    pixels,
-                                )
-                            };
+                            unsafe { tiles.block_32x32(&ops, out_at(r0, c0), pixels) };
                             continue;
                         }
                         // An edge block: through a scratch block.
                         // SAFETY: `block` holds 32 rows of 32.
-                        unsafe {
-                            let c = block.as_mut_ptr();
-                            tiles.block_32x32(
-                                rows,
-                                cols_b,
-                                kblocks,
-                                [&init[0], &init[1]],
-                                c,
-                                2 * TILE,
-                            )
-                        };
+                        unsafe { tiles.block_32x32(&ops, block.as_mut_ptr(), 2 * TILE) };
                         for r in 0..(2 * TILE).min(m.saturating_sub(r0)) {
                             let w = (2 * TILE).min(n - c0);
                             // SAFETY: row r0 + r < m, columns c0 .. c0 + w ≤ n.

@@ -9,7 +9,7 @@
 
 use std::sync::OnceLock;
 
-use crate::bf16::{TILE, TILE_K};
+use crate::bf16::{Block32, TILE, TILE_K};
 
 /// Set (to anything but `0`) to keep every BF16 engine off (this one and AMX), as on a CPU
 /// without them.
@@ -42,33 +42,21 @@ fn cpu_has_avx512_bf16() -> bool {
 /// Rows of one pass: 8 rows × 2 column tiles of 16 keep 16 sums in registers.
 const ROWS: usize = 8;
 
-/// `c` (32×32 f32, `c_stride` floats between rows) = `init` + rows `a0` (16) and `a1` (16)
-/// times columns `b0` (16) and `b1` (16), each a run of `kblocks` tiles as laid out by
-/// [`crate::bf16`]; `init[i]` (16×16, row-major) starts both column halves of row half `i`.
-/// The same contract as the AMX block.
+/// `c` (32×32 f32, `c_stride` floats between rows) = the product block `ops` describes: the
+/// same contract as the AMX block.
 ///
 /// # Safety
 /// [`available`] must hold, and `c` must be valid for writes of 32 rows of 32 floats,
 /// `c_stride` floats apart.
-pub unsafe fn block_32x32(
-    a: [&[u16]; 2],
-    b: [&[u16]; 2],
-    kblocks: usize,
-    init: [&[f32; 256]; 2],
-    c: *mut f32,
-    c_stride: usize,
-) {
-    let tile = TILE * TILE_K;
-    for s in a.iter().chain(b.iter()) {
-        assert!(s.len() >= kblocks * tile, "short tile run");
-    }
+pub unsafe fn block_32x32(ops: &Block32, c: *mut f32, c_stride: usize) {
+    ops.check();
     #[cfg(target_arch = "x86_64")]
     // SAFETY: the caller's promises; the slices are long enough (checked above).
     unsafe {
-        for (half, (a, init)) in a.iter().zip(init).enumerate() {
+        for (half, (a, init)) in ops.a.iter().zip(ops.init).enumerate() {
             for r0 in (0..TILE).step_by(ROWS) {
                 let c = c.add((half * TILE + r0) * c_stride);
-                rows_x32(a, b, kblocks, &init[r0 * TILE..], r0, c, c_stride);
+                rows_x32(a, ops.b, ops.kblocks, &init[r0 * TILE..], r0, c, c_stride);
             }
         }
     }

@@ -411,7 +411,7 @@ mod tests {
     }
 
     /// Against Burn's own conv2d under autodiff: values and the gradients of the input, the
-    /// weight and the bias, on odd shapes; both engines where the CPU has AMX.
+    /// weight and the bias, on odd shapes; every engine this CPU runs.
     #[test]
     fn matches_burn_conv2d_in_value_and_all_gradients() {
         let d = Device::flex().autodiff();

@@ -20,7 +20,8 @@ pub struct UnitGather {
 /// (`[channels, h, w]`) for output pixels `p0 .. p0 + n` (row width `out_w`), zero-padded.
 ///
 /// # Safety
-/// The CPU must have AVX-512 F, BW and BF16 (every CPU with AMX-BF16 does).
+/// The CPU must have AVX-512 F, BW and BF16 (every CPU with AMX-BF16 does, and the AVX-512
+/// BF16 engine needs them too).
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
 pub unsafe fn im2col_vnni(

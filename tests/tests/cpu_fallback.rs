@@ -6,8 +6,8 @@
 //!
 //! The computation: odd-shaped matrix products, and 3×3 / 1×1 / strided convolutions with the
 //! gradients of both their input and their weight, on flex, through Burn's conv2d and through
-//! `ins-conv`'s op (f32 engine, with and without its fused ReLU: its AMX engine is never picked
-//! on these CPUs); the SIREN's `sin(ω·z)` op and the SDF networks' softplus and slope ops,
+//! `ins-conv`'s op (f32 engine, with and without its fused ReLU: its BF16 engines are never
+//! picked on these CPUs); the SIREN's `sin(ω·z)` op and the SDF networks' softplus and slope ops,
 //! whose AVX-512 paths the emulated CPUs replace by plain ones; and the Gram-matrix op.
 //!
 //! A test binary without the libtest harness (`harness = false`): run with the environment

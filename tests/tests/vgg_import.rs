@@ -116,7 +116,8 @@ fn wrong_shapes_are_a_clear_error() {
 /// `--precision bf16` against f32 on the real network and a real photo: the features of every
 /// style layer, their Gram matrices and the input gradient of a style loss stay within stated
 /// tolerances (BF16 keeps 8 bits of mantissa: each input is off by up to 2^-9 relative).
-/// Without AMX, bf16 falls back to f32 and must give the very same features.
+/// Without a BF16 engine (AMX or AVX-512 BF16), bf16 falls back to f32 and must give the very
+/// same features.
 #[test]
 fn bf16_features_stay_close_to_f32_on_the_real_network() {
     use ins_conv::Precision;
@@ -151,7 +152,7 @@ fn bf16_features_stay_close_to_f32_on_the_real_network() {
     if Precision::Bf16.effective() == Precision::F32 {
         assert_eq!(
             fa, fb,
-            "without AMX, bf16 must fall back to the f32 network"
+            "without a BF16 engine, bf16 must fall back to the f32 network"
         );
         return;
     }

@@ -96,7 +96,7 @@ impl Vgg16Features {
         self
     }
 
-    /// The AMX engine when BF16 is asked for and can run on `device`; `None` means Burn's own
+    /// The BF16 engine when BF16 is asked for and can run on `device`; `None` means Burn's own
     /// f32 convolution.
     fn bf16_engine(&self, device: &Device) -> Option<Engine> {
         if self.precision == Precision::Bf16 && ins_conv::kernel_device(device) {
