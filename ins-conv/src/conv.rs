@@ -3,101 +3,17 @@
 //!
 //! The input gradient is itself a convolution (of the output gradient with the flipped,
 //! channel-swapped kernel; see [`Gather::transposed`]), so both run through one routine and
-//! either GEMM engine. The weight gradient is one `[c_out, pixels] × [pixels, taps]` product per
+//! any of the GEMM engines. The weight gradient is one `[c_out, pixels] × [pixels, taps]` product per
 //! chunk, summed, in f32: a frozen network (VGG) never asks for it.
 
 use rayon::prelude::*;
 
-use crate::amx::{self, Tiles};
-use crate::bf16::{Block32, PackedLeft, TILE, TILE_K, pack_right, round_up};
-use crate::dpbf16;
+use crate::bf16::{Block32, TILE, TILE_K, pack_right, round_up};
+use crate::engine::{Bf16Block, Engine};
 use crate::geometry::{ConvGeometry, Gather};
 use crate::im2col::{ImageSource, im2col};
+use crate::kernel_matrix::{KernelMatrix, Left};
 use crate::vnni_im2col::{UnitGather, im2col_vnni};
-
-/// The matrix-product engine.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Engine {
-    /// f32 products (gemm's AVX-512/AVX2/SSE kernels, picked at run time).
-    F32,
-    /// BF16 inputs with f32 sums on AMX tiles. Only where [`amx::available`] holds.
-    Bf16Amx,
-    /// BF16 inputs with f32 sums by AVX-512 BF16 dot products. Only where
-    /// [`dpbf16::available`] holds.
-    Bf16Avx512,
-}
-
-impl Engine {
-    /// The fastest BF16 engine this CPU runs (AMX, then AVX-512 BF16), if any.
-    pub fn bf16() -> Option<Self> {
-        if amx::available() {
-            Some(Engine::Bf16Amx)
-        } else if dpbf16::available() {
-            Some(Engine::Bf16Avx512)
-        } else {
-            None
-        }
-    }
-
-    /// [`Engine::bf16`], else `F32`.
-    pub fn bf16_or_f32() -> Self {
-        Self::bf16().unwrap_or(Engine::F32)
-    }
-
-    /// Every engine this CPU runs (for tests and benchmarks).
-    pub fn available() -> Vec<Self> {
-        let mut engines = vec![Engine::F32];
-        if amx::available() {
-            engines.push(Engine::Bf16Amx);
-        }
-        if dpbf16::available() {
-            engines.push(Engine::Bf16Avx512);
-        }
-        engines
-    }
-
-    /// Where this engine computes, for messages.
-    pub fn describe(self) -> &'static str {
-        match self {
-            Engine::F32 => "f32",
-            Engine::Bf16Amx => "bf16 on AMX",
-            Engine::Bf16Avx512 => "bf16 with AVX-512 BF16",
-        }
-    }
-}
-
-/// The BF16 32×32 block of an engine, ready on this thread.
-enum Bf16Block {
-    Amx(Tiles),
-    Avx512,
-}
-
-impl Bf16Block {
-    fn new(engine: Engine) -> Self {
-        match engine {
-            Engine::Bf16Amx => Bf16Block::Amx(Tiles::configure()),
-            Engine::Bf16Avx512 => {
-                assert!(dpbf16::available(), "AVX-512 BF16 is not available");
-                Bf16Block::Avx512
-            }
-            Engine::F32 => unreachable!("f32 has no BF16 block"),
-        }
-    }
-
-    /// See [`Tiles::block_32x32`].
-    ///
-    /// # Safety
-    /// As there.
-    unsafe fn block_32x32(&mut self, ops: &Block32, c: *mut f32, c_stride: usize) {
-        // SAFETY: the engine is available (checked in `new`); the rest is the caller's.
-        unsafe {
-            match self {
-                Bf16Block::Amx(tiles) => tiles.block_32x32(ops, c, c_stride),
-                Bf16Block::Avx512 => dpbf16::block_32x32(ops, c, c_stride),
-            }
-        }
-    }
-}
 
 /// Bytes of f32 im2col values per chunk: a few hundred kB, so a chunk stays in L2.
 const CHUNK_BYTES: usize = 1 << 20;
@@ -124,61 +40,6 @@ struct Shared(*mut f32);
 // SAFETY: every job writes a disjoint set of elements (its image, its pixel chunk).
 unsafe impl Send for Shared {}
 unsafe impl Sync for Shared {}
-
-/// A convolution's kernel as the left operand of its GEMM, in the layout its engine reads.
-/// Building it costs a pass over the weights (a BF16 packing, a flip for the input gradient);
-/// a frozen network's can be built once and kept (see `op`).
-pub enum KernelMatrix {
-    /// Row-major f32 `[m, k]` (gemm).
-    F32(Vec<f32>),
-    /// BF16 tiles, for a BF16 engine.
-    Bf16(PackedLeft, Engine),
-}
-
-/// A kernel matrix, borrowed: the f32 forward reads the weights as they are.
-#[derive(Clone, Copy)]
-enum Left<'a> {
-    F32(&'a [f32]),
-    Bf16(&'a PackedLeft, Engine),
-}
-
-impl KernelMatrix {
-    /// The forward's left operand: `w` as `[c_out, c_in · kh · kw]`.
-    pub fn forward(w: &[f32], g: &ConvGeometry, engine: Engine) -> Self {
-        match engine {
-            Engine::F32 => KernelMatrix::F32(w.to_vec()),
-            bf16 => KernelMatrix::Bf16(PackedLeft::new(w, g.c_out, g.taps()), bf16),
-        }
-    }
-
-    /// The input gradient's left operand: the flipped kernel with its channels swapped,
-    /// `[c_in, c_out · kh · kw]`.
-    pub fn input_grad(w: &[f32], g: &ConvGeometry, engine: Engine) -> Self {
-        let flipped = flipped_kernel(w, g);
-        match engine {
-            Engine::F32 => KernelMatrix::F32(flipped),
-            bf16 => {
-                let k = g.c_out * g.kernel[0] * g.kernel[1];
-                KernelMatrix::Bf16(PackedLeft::new(&flipped, g.c_in, k), bf16)
-            }
-        }
-    }
-
-    /// The engine that reads it.
-    pub fn engine(&self) -> Engine {
-        match self {
-            KernelMatrix::F32(_) => Engine::F32,
-            KernelMatrix::Bf16(_, engine) => *engine,
-        }
-    }
-
-    fn left(&self) -> Left<'_> {
-        match self {
-            KernelMatrix::F32(v) => Left::F32(v),
-            KernelMatrix::Bf16(p, engine) => Left::Bf16(p, *engine),
-        }
-    }
-}
 
 /// The common routine: `out[b, m, p] = Σ_k left[m, k] · cols_b[k, p] (+ bias[m])`, where
 /// `cols_b` is im2col of image `b` of `src` (`[batch, channels, h, w]`) through `gather`.
@@ -378,25 +239,6 @@ fn forward_from(
     )
 }
 
-/// The flipped kernel with its channels swapped, `[c_in, c_out · kh · kw]`: the input gradient
-/// is the convolution of the output gradient with it.
-fn flipped_kernel(w: &[f32], g: &ConvGeometry) -> Vec<f32> {
-    let taps = g.kernel[0] * g.kernel[1];
-    let mut left = vec![0.0f32; g.c_in * g.c_out * taps];
-    left.par_chunks_mut(g.c_out * taps)
-        .enumerate()
-        .for_each(|(ci, row)| {
-            for (co, dst) in row.chunks_mut(taps).enumerate() {
-                let src = &w[(co * g.c_in + ci) * taps..][..taps];
-                // Flipping both axes of a row-major kernel reverses it.
-                dst.iter_mut()
-                    .zip(src.iter().rev())
-                    .for_each(|(d, &v)| *d = v);
-            }
-        });
-    left
-}
-
 /// `∂L/∂x [batch, c_in, h, w]` from `∂L/∂y [batch, c_out, ho, wo]`; with `relu_out` (the
 /// output of a fused ReLU), from `∂L/∂y` where that output is positive.
 pub fn input_grad(
@@ -517,6 +359,7 @@ mod tests {
     use super::*;
     use crate::bf16::{from_bf16, to_bf16};
     use crate::reference;
+    use crate::{amx, dpbf16};
 
     /// Deterministic values in [-1, 1).
     fn values(n: usize, seed: u64) -> Vec<f32> {

@@ -12,7 +12,8 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use burn::backend::flex::FlexTensor;
 
-use crate::conv::{Engine, KernelMatrix};
+use crate::engine::Engine;
+use crate::kernel_matrix::KernelMatrix;
 
 /// Which product a kernel matrix feeds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

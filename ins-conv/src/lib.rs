@@ -9,14 +9,16 @@ pub mod amx;
 pub mod bf16;
 pub mod conv;
 pub mod dpbf16;
+pub mod engine;
 pub mod geometry;
 pub mod im2col;
 pub mod kernel_cache;
+pub mod kernel_matrix;
 pub mod op;
 pub mod reference;
 pub mod vnni_im2col;
 
-pub use conv::Engine;
+pub use engine::Engine;
 pub use geometry::ConvGeometry;
 pub use op::{conv2d, kernel_device};
 

@@ -16,9 +16,11 @@ use burn::backend::{
 };
 use burn::prelude::*;
 
-use crate::conv::{self, Engine, KernelMatrix};
+use crate::conv;
+use crate::engine::Engine;
 use crate::geometry::ConvGeometry;
 use crate::kernel_cache::{self, Role};
+use crate::kernel_matrix::KernelMatrix;
 
 /// Stride, padding and engine of one convolution (the rest comes from the tensors' shapes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -160,23 +162,17 @@ impl ConvOps for Flex {
         params: ConvParams,
     ) -> FlexTensor {
         let g = params.geometry(&x, &weight);
-        let y = if params.engine == Engine::F32 {
-            // The f32 forward reads the weights as they are: nothing to build or keep.
-            values(&x, |x| {
-                values(&weight, |w| {
-                    values(&bias, |b| {
-                        conv::forward(x, w, Some(b), &g, params.relu, params.engine)
-                    })
-                })
+        // The f32 forward reads the weights as they are: nothing to build or keep.
+        let kernel = (params.engine != Engine::F32)
+            .then(|| kernel_matrix(&weight, &g, Role::Forward, params));
+        let y = values(&x, |x| {
+            values(&bias, |b| match &kernel {
+                Some(kernel) => conv::forward_with(x, kernel, Some(b), &g, params.relu),
+                None => values(&weight, |w| {
+                    conv::forward(x, w, Some(b), &g, params.relu, Engine::F32)
+                }),
             })
-        } else {
-            let kernel = kernel_matrix(&weight, &g, Role::Forward, params);
-            values(&x, |x| {
-                values(&bias, |b| {
-                    conv::forward_with(x, &kernel, Some(b), &g, params.relu)
-                })
-            })
-        };
+        });
         let [ho, wo] = g.out_hw();
         tensor(y, [g.batch, g.c_out, ho, wo])
     }
