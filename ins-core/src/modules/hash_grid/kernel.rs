@@ -113,10 +113,9 @@ impl Layout {
         self.offset[l] + local
     }
 
-    /// The 8 corner rows and trilinear weights of point `p` in level `l` (corner `c` has
-    /// offsets `(c & 1, c >> 1 & 1, c >> 2 & 1)`); the same rows as [`Layout::row`].
-    #[inline]
-    pub fn corner_weights(&self, l: usize, p: &[f32]) -> ([usize; 8], [f32; 8]) {
+    /// The cell of point `p` in level `l`: its lower corner and the fractions within it.
+    #[inline(always)]
+    fn cell(&self, l: usize, p: &[f32]) -> ([u32; 3], [f32; 3]) {
         let n = self.resolution[l];
         let nf = n as f32;
         let mut i = [0u32; 3];
@@ -128,11 +127,17 @@ impl Layout {
             i[k] = c;
             f[k] = x - c as f32;
         }
-        let g = [1.0 - f[0], 1.0 - f[1], 1.0 - f[2]];
+        (i, f)
+    }
+
+    /// The 8 corner rows of the cell with lower corner `i` in level `l` (corner `c` has
+    /// offsets `(c & 1, c >> 1 & 1, c >> 2 & 1)`); the same rows as [`Layout::row`].
+    #[inline(always)]
+    fn cell_rows(&self, l: usize, i: [u32; 3]) -> [usize; 8] {
         let off = self.offset[l];
         let mut rows = [0usize; 8];
         if self.dense[l] {
-            let v = n as usize + 1;
+            let v = self.resolution[l] as usize + 1;
             let base = i[0] as usize + i[1] as usize * v + i[2] as usize * v * v;
             for (c, r) in rows.iter_mut().enumerate() {
                 *r = off + base + (c & 1) + ((c >> 1) & 1) * v + ((c >> 2) & 1) * v * v;
@@ -154,41 +159,40 @@ impl Layout {
                 *r = off + ((hx[c & 1] ^ hy[(c >> 1) & 1] ^ hz[(c >> 2) & 1]) & mask) as usize;
             }
         }
+        rows
+    }
+
+    /// The 8 corner rows and trilinear weights of point `p` in level `l` (corner `c` has
+    /// offsets `(c & 1, c >> 1 & 1, c >> 2 & 1)`); the same rows as [`Layout::row`].
+    #[inline(always)]
+    pub fn corner_weights(&self, l: usize, p: &[f32]) -> ([usize; 8], [f32; 8]) {
+        let (i, f) = self.cell(l, p);
+        let g = [1.0 - f[0], 1.0 - f[1], 1.0 - f[2]];
         let mut w = [0f32; 8];
         for (c, wc) in w.iter_mut().enumerate() {
             *wc = (if c & 1 == 1 { f[0] } else { g[0] })
                 * (if (c >> 1) & 1 == 1 { f[1] } else { g[1] })
                 * (if (c >> 2) & 1 == 1 { f[2] } else { g[2] });
         }
-        (rows, w)
+        (self.cell_rows(l, i), w)
     }
 
     /// The 8 corner rows and trilinear weights of point `p` in level `l`, with the derivatives
     /// of the weights with respect to `p` (per axis).
-    #[inline]
+    #[inline(always)]
     pub fn corners(&self, l: usize, p: [f32; 3]) -> ([usize; 8], [f32; 8], [[f32; 3]; 8]) {
-        let n = self.resolution[l];
-        let nf = n as f32;
-        let mut i = [0u32; 3];
-        let mut f = [0f32; 3];
-        for k in 0..3 {
-            let x = p[k].clamp(0.0, 1.0) * nf;
-            let c = (x as u32).min(n - 1);
-            i[k] = c;
-            f[k] = x - c as f32;
-        }
-        let mut rows = [0usize; 8];
+        let nf = self.resolution[l] as f32;
+        let (i, f) = self.cell(l, &p);
         let mut w = [0f32; 8];
         let mut dw = [[0f32; 3]; 8];
         for c in 0..8 {
-            let b = [(c & 1) as u32, ((c >> 1) & 1) as u32, ((c >> 2) & 1) as u32];
-            rows[c] = self.row(l, i[0] + b[0], i[1] + b[1], i[2] + b[2]);
+            let b = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
             let t: [f32; 3] = std::array::from_fn(|k| if b[k] == 1 { f[k] } else { 1.0 - f[k] });
             let s: [f32; 3] = std::array::from_fn(|k| if b[k] == 1 { nf } else { -nf });
             w[c] = t[0] * t[1] * t[2];
             dw[c] = [s[0] * t[1] * t[2], t[0] * s[1] * t[2], t[0] * t[1] * s[2]];
         }
-        (rows, w, dw)
+        (self.cell_rows(l, i), w, dw)
     }
 }
 
