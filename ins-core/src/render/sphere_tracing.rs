@@ -1,8 +1,17 @@
 //! Finding where rays meet the zero level set of a signed distance function (IDR's ray
-//! tracer), batched over rays with no gradient: sphere tracing from the near end, then, for
-//! rays where it stalls or leaves the volume, dense sampling for the first sign change and a
-//! secant refinement of it. Rays that meet nothing report where along them the SDF was
-//! smallest (IDR's mask loss looks there).
+//! tracer), batched over rays with no gradient.
+//!
+//! 1. Sphere tracing from the near end. A ray that steps from outside to inside is bracketed
+//!    by its last two steps; one that converges is a hit.
+//! 2. The rest are searched by sampling the ray for its first sign change, then refined by
+//!    secant steps. How densely depends on what the march saw: a ray that left the volume
+//!    without ever coming closer than [`TraceOptions::clear_miss`] to the surface gets a coarse
+//!    check (which still catches a field that overstates distances), every other ray the full
+//!    search; then each looks again, finer, around its closest sample (thin parts hide between
+//!    samples, and the mask loss wants the closest approach).
+//!
+//! Rays that meet nothing report where along them the SDF was smallest (IDR's mask loss
+//! looks there): the smallest value of every sample the ray had, march included.
 
 use super::rays::Rays;
 
@@ -13,8 +22,16 @@ pub struct TraceOptions {
     pub max_steps: usize,
     /// A ray has converged when `|f| < eps`.
     pub eps: f32,
-    /// Samples per ray of the fallback search.
+    /// Samples per ray of the full search.
     pub samples: usize,
+    /// Samples per ray of the check on clear misses.
+    pub coarse_samples: usize,
+    /// Samples in the window of two spacings around a searched ray's closest sample.
+    pub refine_samples: usize,
+    /// A ray that left the volume with the SDF above this all along its march is a clear
+    /// miss (in the scene's units; the full search's spacing on a unit sphere's diameter is
+    /// about 0.02).
+    pub clear_miss: f32,
     /// Secant iterations refining a sign change.
     pub secant_steps: usize,
 }
@@ -25,6 +42,9 @@ impl Default for TraceOptions {
             max_steps: 32,
             eps: 5e-5,
             samples: 96,
+            coarse_samples: 24,
+            refine_samples: 12,
+            clear_miss: 0.05,
             secant_steps: 8,
         }
     }
@@ -41,6 +61,101 @@ pub struct Traced {
     pub t_min_sdf: Vec<f32>,
 }
 
+/// A sign change along ray `ray`: `f(t0) ≥ 0 > f(t1)`.
+#[derive(Debug, Clone, Copy)]
+struct Bracket {
+    ray: usize,
+    t0: f32,
+    f0: f32,
+    t1: f32,
+    f1: f32,
+}
+
+impl Bracket {
+    /// The secant estimate of the crossing, inside the bracket.
+    fn secant(&self) -> f32 {
+        let d = self.f1 - self.f0;
+        if d.abs() > 1e-12 {
+            (self.t0 - self.f0 * (self.t1 - self.t0) / d).clamp(self.t0, self.t1)
+        } else {
+            0.5 * (self.t0 + self.t1)
+        }
+    }
+}
+
+/// A stretch of a ray to sample: `count` evenly spaced samples from `t0` to `t1`.
+#[derive(Debug, Clone, Copy)]
+struct Stretch {
+    ray: usize,
+    t0: f32,
+    t1: f32,
+    count: usize,
+}
+
+impl Stretch {
+    fn at(&self, j: usize) -> f32 {
+        self.t0 + (self.t1 - self.t0) * j as f32 / (self.count - 1).max(1) as f32
+    }
+}
+
+/// The closest sample of each ray so far.
+struct Closest {
+    t: Vec<f32>,
+    f: Vec<f32>,
+}
+
+impl Closest {
+    fn offer(&mut self, ray: usize, t: f32, f: f32) {
+        if f.is_finite() && f < self.f[ray] {
+            self.f[ray] = f;
+            self.t[ray] = t;
+        }
+    }
+}
+
+/// Samples every stretch at once; each ray's first sign change becomes a bracket, and every
+/// sample is offered to `closest`. Returns the brackets and the stretches without one.
+fn search(
+    rays: &Rays,
+    stretches: &[Stretch],
+    closest: &mut Closest,
+    sdf: &mut impl FnMut(&[f32]) -> Vec<f32>,
+) -> (Vec<Bracket>, Vec<(Stretch, usize)>) {
+    let mut points = Vec::with_capacity(3 * stretches.iter().map(|s| s.count).sum::<usize>());
+    for s in stretches {
+        for j in 0..s.count {
+            points.extend(rays.point(s.ray, s.at(j)).to_array());
+        }
+    }
+    let f = sdf(&points);
+    let (mut brackets, mut open) = (Vec::new(), Vec::new());
+    let mut at = 0;
+    for s in stretches {
+        let fs = &f[at..at + s.count];
+        at += s.count;
+        for (j, &v) in fs.iter().enumerate() {
+            closest.offer(s.ray, s.at(j), v);
+        }
+        match (1..s.count).find(|&j| fs[j] < 0.0 && fs[j - 1] >= 0.0) {
+            Some(j) => brackets.push(Bracket {
+                ray: s.ray,
+                t0: s.at(j - 1),
+                f0: fs[j - 1],
+                t1: s.at(j),
+                f1: fs[j],
+            }),
+            None => {
+                let (jmin, _) = fs.iter().enumerate().filter(|(_, v)| v.is_finite()).fold(
+                    (0, f32::INFINITY),
+                    |b, (j, &v)| if v < b.1 { (j, v) } else { b },
+                );
+                open.push((*s, jmin));
+            }
+        }
+    }
+    (brackets, open)
+}
+
 /// Traces `rays` (unit directions, intervals `[near, far]`) against `sdf`, which maps points
 /// (`n·3`) to signed distances (`n`), negative inside.
 pub fn sphere_trace(
@@ -51,6 +166,15 @@ pub fn sphere_trace(
     let n = rays.len();
     let mut t = rays.near.clone();
     let mut hit = vec![false; n];
+    let mut closest = Closest {
+        t: rays.near.clone(),
+        f: vec![f32::INFINITY; n],
+    };
+    let mut brackets = Vec::new();
+    // Rays that left the volume: clear misses get the coarse check, the rest the full search.
+    let mut exited = vec![false; n];
+    // The last sample of each ray, outside the surface.
+    let mut last = vec![(0f32, f32::NAN); n];
     let mut active: Vec<usize> = (0..n).filter(|&i| rays.far[i] > rays.near[i]).collect();
     let mut points = Vec::new();
     // 1. Sphere tracing from the near end.
@@ -69,97 +193,108 @@ pub fn sphere_trace(
             if !v.is_finite() {
                 continue;
             }
+            closest.offer(i, t[i], v);
             if v.abs() < opts.eps {
                 hit[i] = true;
             } else if v < 0.0 {
-                // Started or stepped inside: leave it to the sign-change search.
-                continue;
+                // Stepped inside: the previous step, outside, closes the bracket. A ray that
+                // starts inside has none and goes to the full search.
+                let (t0, f0) = last[i];
+                if f0.is_finite() {
+                    brackets.push(Bracket {
+                        ray: i,
+                        t0,
+                        f0,
+                        t1: t[i],
+                        f1: v,
+                    });
+                }
             } else {
+                last[i] = (t[i], v);
                 t[i] += v;
                 if t[i] < rays.far[i] {
                     still.push(i);
+                } else {
+                    exited[i] = true;
                 }
             }
         }
         active = still;
     }
-    // 2. Dense sampling for every ray that has not converged.
-    let rest: Vec<usize> = (0..n)
-        .filter(|&i| !hit[i] && rays.far[i] > rays.near[i])
-        .collect();
-    let mut t_min = rays.near.clone();
-    if !rest.is_empty() && opts.samples >= 2 {
-        let m = opts.samples;
-        let ts = |i: usize, j: usize| {
-            rays.near[i] + (rays.far[i] - rays.near[i]) * j as f32 / (m - 1) as f32
-        };
-        points.clear();
-        for &i in &rest {
-            for j in 0..m {
-                points.extend(rays.point(i, ts(i, j)).to_array());
+    // 2. Sampling for every ray that has neither converged nor been bracketed.
+    let bracketed: Vec<bool> = {
+        let mut b = vec![false; n];
+        for br in &brackets {
+            b[br.ray] = true;
+        }
+        b
+    };
+    let stretches: Vec<Stretch> = (0..n)
+        .filter(|&i| !hit[i] && !bracketed[i] && rays.far[i] > rays.near[i])
+        .map(|i| {
+            let clear = exited[i] && closest.f[i] > opts.clear_miss;
+            Stretch {
+                ray: i,
+                t0: rays.near[i],
+                t1: rays.far[i],
+                count: if clear {
+                    opts.coarse_samples
+                } else {
+                    opts.samples
+                },
             }
+        })
+        .filter(|s| s.count >= 2)
+        .collect();
+    let (found, open) = search(rays, &stretches, &mut closest, &mut sdf);
+    brackets.extend(found);
+    // A finer look around the closest sample of each ray without a crossing.
+    if opts.refine_samples >= 2 {
+        let windows: Vec<Stretch> = open
+            .iter()
+            .map(|&(s, j)| {
+                let step = (s.t1 - s.t0) / (s.count - 1).max(1) as f32;
+                let centre = s.at(j);
+                Stretch {
+                    ray: s.ray,
+                    t0: (centre - step).max(s.t0),
+                    t1: (centre + step).min(s.t1),
+                    count: opts.refine_samples,
+                }
+            })
+            .collect();
+        let (found, _) = search(rays, &windows, &mut closest, &mut sdf);
+        brackets.extend(found);
+    }
+    // 3. Secant refinement of each sign change, all brackets at once.
+    for _ in 0..opts.secant_steps {
+        if brackets.is_empty() {
+            break;
+        }
+        points.clear();
+        let mids: Vec<f32> = brackets.iter().map(Bracket::secant).collect();
+        for (b, &tm) in brackets.iter().zip(&mids) {
+            points.extend(rays.point(b.ray, tm).to_array());
         }
         let f = sdf(&points);
-        let mut brackets = Vec::new();
-        for (k, &i) in rest.iter().enumerate() {
-            let fs = &f[k * m..(k + 1) * m];
-            let first_inside = (1..m).find(|&j| fs[j] < 0.0 && fs[j - 1] >= 0.0);
-            match first_inside {
-                Some(j) => brackets.push((i, ts(i, j - 1), fs[j - 1], ts(i, j), fs[j])),
-                None => {
-                    let (jmin, _) = fs.iter().enumerate().filter(|(_, v)| v.is_finite()).fold(
-                        (0, f32::INFINITY),
-                        |b, (j, &v)| if v < b.1 { (j, v) } else { b },
-                    );
-                    t_min[i] = ts(i, jmin);
-                }
-            }
-        }
-        // 3. Secant refinement of each sign change, all brackets at once.
-        for _ in 0..opts.secant_steps {
-            if brackets.is_empty() {
-                break;
-            }
-            points.clear();
-            let mids: Vec<f32> = brackets
-                .iter()
-                .map(|&(_, t0, f0, t1, f1)| {
-                    let d = f1 - f0;
-                    if d.abs() > 1e-12 {
-                        (t0 - f0 * (t1 - t0) / d).clamp(t0, t1)
-                    } else {
-                        0.5 * (t0 + t1)
-                    }
-                })
-                .collect();
-            for (b, &tm) in brackets.iter().zip(&mids) {
-                points.extend(rays.point(b.0, tm).to_array());
-            }
-            let f = sdf(&points);
-            for ((b, &tm), &fm) in brackets.iter_mut().zip(&mids).zip(&f) {
-                if fm >= 0.0 {
-                    b.1 = tm;
-                    b.2 = fm;
-                } else {
-                    b.3 = tm;
-                    b.4 = fm;
-                }
-            }
-        }
-        for (i, t0, f0, t1, f1) in brackets {
-            let d = f1 - f0;
-            t[i] = if d.abs() > 1e-12 {
-                t0 - f0 * (t1 - t0) / d
+        for ((b, &tm), &fm) in brackets.iter_mut().zip(&mids).zip(&f) {
+            if fm >= 0.0 {
+                b.t0 = tm;
+                b.f0 = fm;
             } else {
-                0.5 * (t0 + t1)
-            };
-            hit[i] = true;
+                b.t1 = tm;
+                b.f1 = fm;
+            }
         }
+    }
+    for b in brackets {
+        t[b.ray] = b.secant();
+        hit[b.ray] = true;
     }
     Traced {
         t,
         hit,
-        t_min_sdf: t_min,
+        t_min_sdf: closest.t,
     }
 }
 
@@ -238,6 +373,84 @@ mod tests {
             } else if y.abs() > 0.31 {
                 assert!(!out.hit[i]);
             }
+        }
+    }
+
+    #[test]
+    fn a_ray_that_steps_inside_is_bracketed_by_its_march() {
+        // A field that overstates distances by half makes the march step through the
+        // surface; the last two steps bracket it, with no search along the ray.
+        let r = rays();
+        let calls = std::cell::Cell::new(0usize);
+        let overstated = |p: &[f32]| {
+            calls.set(calls.get() + p.len() / 3);
+            sphere(p).into_iter().map(|v| v * 1.5).collect::<Vec<_>>()
+        };
+        let out = sphere_trace(&r, &TraceOptions::default(), overstated);
+        let i = 25;
+        let (x, y) = (r.origins[i].x, r.origins[i].y);
+        let want = 2.0 - (0.25 - x * x - y * y).sqrt();
+        assert!(
+            out.hit[i] && (out.t[i] - want).abs() < 1e-4,
+            "{} vs {want}",
+            out.t[i]
+        );
+        // Every ray through the sphere was bracketed by its march: the only samples beyond
+        // the march and secant steps are the clear misses' coarse checks.
+        let through = (0..r.len()).filter(|&i| out.hit[i]).count();
+        let opts = TraceOptions::default();
+        let bound = r.len() * opts.max_steps
+            + (r.len() - through) * (opts.coarse_samples + opts.refine_samples)
+            + through * opts.secant_steps;
+        assert!(calls.get() <= bound, "{} samples > {bound}", calls.get());
+    }
+
+    #[test]
+    fn clear_misses_cost_only_the_coarse_check() {
+        let mut r = Rays::default();
+        for i in 0..20 {
+            // Passing 0.2 or more beside the sphere of radius 0.5.
+            r.push(
+                Vec3::new(0.7 + 0.01 * i as f32, 0.0, 2.0),
+                Vec3::NEG_Z,
+                0.5,
+                3.5,
+            );
+        }
+        let calls = std::cell::Cell::new(0usize);
+        let counted = |p: &[f32]| {
+            calls.set(calls.get() + p.len() / 3);
+            sphere(p)
+        };
+        let opts = TraceOptions::default();
+        let out = sphere_trace(&r, &opts, counted);
+        assert!(out.hit.iter().all(|&h| !h));
+        assert!(
+            calls.get() <= r.len() * (opts.max_steps + opts.coarse_samples + opts.refine_samples),
+            "{} samples",
+            calls.get()
+        );
+        for i in 0..r.len() {
+            assert!((out.t_min_sdf[i] - 2.0).abs() < 0.1, "{}", out.t_min_sdf[i]);
+        }
+    }
+
+    #[test]
+    fn a_near_miss_finds_its_closest_approach_finer_than_the_samples() {
+        // Rays passing 0.01–0.03 beside the sphere: the closest approach is at t = 2, and
+        // the search refines it well below its own spacing (3 / 95 ≈ 0.03).
+        let mut r = Rays::default();
+        for y in [0.51f32, 0.52, 0.53] {
+            r.push(Vec3::new(0.0, y, 2.0), Vec3::NEG_Z, 0.5, 3.5);
+        }
+        let out = sphere_trace(&r, &TraceOptions::default(), sphere);
+        for i in 0..r.len() {
+            assert!(!out.hit[i]);
+            assert!(
+                (out.t_min_sdf[i] - 2.0).abs() < 0.005,
+                "ray {i}: {}",
+                out.t_min_sdf[i]
+            );
         }
     }
 
