@@ -37,10 +37,18 @@ pub fn trace(model: &IdrModel, rays: &Rays, opts: &TraceOptions, device: &Device
 /// IDR's differentiable surface point: `x(θ) = x₀ − v · f(x₀; θ) / (∇f(x₀) · v)` with `x₀`
 /// (the traced hits `[H, 3]`), `v` (unit directions) and ∇f detached. Its value is `x₀` (where
 /// f ≈ 0) and its derivative in θ is the implicit function's, `−v · (∂f/∂θ) / (∇f · v)`.
+/// Only `f` is taped: the detached ∇f comes from the network without autodiff (its forward-mode
+/// tangents would be computed and recorded for nothing).
 pub fn surface_point(sdf: &SdfNet, x0: Tensor<2>, v: Tensor<2>) -> Tensor<2> {
     let [h, _] = x0.dims();
-    let (f0, _, g0) = sdf.forward_with_gradient(x0.clone());
-    let denom = (g0.detach() * v.clone()).sum_dim(1).reshape([h]);
+    let f0 = sdf.sdf(x0.clone());
+    let g0 = if x0.device().is_autodiff() {
+        let (_, _, g) = sdf.valid().forward_with_gradient(x0.clone().inner());
+        Tensor::from_inner(g)
+    } else {
+        sdf.forward_with_gradient(x0.clone()).2
+    };
+    let denom = (g0 * v.clone()).sum_dim(1).reshape([h]);
     // Keep the step finite at grazing hits: |∇f · v| ≥ 0.01, sign kept (0 counts as +).
     let sign = denom
         .clone()
