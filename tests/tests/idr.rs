@@ -35,11 +35,14 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     let device = Device::flex();
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene");
+    // 24 views, 18 of them for training: with 16 (12 for training) the held-out PSNR inside the
+    // mask sat 0.1 to 0.4 dB above the bar below and moved by as much with any change to the
+    // tracer; 24 views give 15.1 dB at the same number of steps, a decibel clear of it.
     write_dtu(
         &scene,
         &SynthOptions {
             size: 48,
-            views: 16,
+            views: 24,
         },
     )
     .unwrap();
