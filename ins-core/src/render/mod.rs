@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod geometry;
+pub mod mask_sampler;
 pub mod occupancy;
 pub mod patches;
 pub mod paths;
