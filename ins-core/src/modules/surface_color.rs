@@ -4,6 +4,7 @@
 use burn::prelude::*;
 
 use super::encoding::FourierEncoding;
+use super::hash_grid::{HashGrid, HashGridConfig};
 use super::mlp::RgbMlp;
 
 /// Configuration of a [`SurfaceColor`].
@@ -20,6 +21,10 @@ pub struct SurfaceColorConfig {
     /// Octaves of the view-direction encoding (IDR: 4).
     #[config(default = 4)]
     pub dir_freqs: usize,
+    /// An appearance hash grid over `[-1, 1]³` whose features join the input: texture finer
+    /// than the SDF's own grid can hold without roughening the surface (none: IDR).
+    #[config(default = "None")]
+    pub grid: Option<HashGridConfig>,
 }
 
 /// `[x, n, enc(v), f]` → ReLU layers → sigmoid RGB.
@@ -29,21 +34,26 @@ pub struct SurfaceColor {
     pub mlp: RgbMlp,
     /// Octaves of the view-direction encoding.
     pub dir_freqs: usize,
+    /// Appearance grid, when configured.
+    pub grid: Option<HashGrid>,
 }
 
 impl SurfaceColorConfig {
     /// Builds the network.
     pub fn init(&self, device: &Device) -> SurfaceColor {
-        let d_in = 3 + 3 + FourierEncoding::new(self.dir_freqs).d_out(3) + self.d_features;
+        let grid = self.grid.as_ref().map(|g| g.init(device));
+        let d_grid = grid.as_ref().map_or(0, HashGrid::d_out);
+        let d_in = 3 + 3 + FourierEncoding::new(self.dir_freqs).d_out(3) + self.d_features + d_grid;
         SurfaceColor {
             mlp: RgbMlp::new(d_in, self.d_hidden, self.depth, device),
             dir_freqs: self.dir_freqs,
+            grid,
         }
     }
 }
 
 impl SurfaceColor {
-    /// `x, normals, dirs [N, 3]`, `features [N, F]` → RGB `[N, 3]`.
+    /// `x, normals, dirs [N, 3]`, `features [N, F]` → RGB `[N, 3]`; `x` inside `[-1, 1]³`.
     pub fn forward(
         &self,
         x: Tensor<2>,
@@ -52,7 +62,42 @@ impl SurfaceColor {
         features: Tensor<2>,
     ) -> Tensor<2> {
         let v = FourierEncoding::new(self.dir_freqs).encode(dirs);
-        self.mlp
-            .forward(Tensor::cat(vec![x, normals, v, features], 1))
+        let mut inputs = vec![x.clone(), normals, v, features];
+        if let Some(grid) = &self.grid {
+            inputs.push(grid.forward(x.mul_scalar(0.5).add_scalar(0.5)));
+        }
+        self.mlp.forward(Tensor::cat(inputs, 1))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    #[test]
+    fn the_appearance_grid_widens_the_input_and_learns_from_the_colour() {
+        let d = Device::flex().autodiff();
+        d.seed(3);
+        let grid = HashGridConfig::new()
+            .with_log2_table(10)
+            .with_base_resolution(4)
+            .with_max_resolution(32);
+        let plain = SurfaceColorConfig::new(5).init(&d);
+        let color = SurfaceColorConfig::new(5).with_grid(Some(grid)).init(&d);
+        let d_grid = color.grid.as_ref().unwrap().d_out();
+        assert_eq!(
+            color.mlp.hidden.layers[0].weight.dims()[0],
+            plain.mlp.hidden.layers[0].weight.dims()[0] + d_grid
+        );
+        let n = 16;
+        let x = Tensor::<2>::random([n, 3], Distribution::Uniform(-1.0, 1.0), &d);
+        let rand3 = || Tensor::<2>::random([n, 3], Distribution::Default, &d);
+        let rgb = color.forward(x, rand3(), rand3(), Tensor::<2>::zeros([n, 5], &d));
+        assert_eq!(rgb.dims(), [n, 3]);
+        let grads = rgb.sum().backward();
+        let g = color.grid.as_ref().unwrap().table.val().grad(&grads);
+        let g = g.expect("the grid's table has a gradient");
+        assert!(g.abs().sum().into_scalar::<f32>() > 0.0);
     }
 }
