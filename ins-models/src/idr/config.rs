@@ -38,6 +38,10 @@ pub struct IdrRunConfig {
     /// Rays per pretraining step.
     #[arg(long, default_value_t = 2048)]
     pub rays: usize,
+    /// Share of each pretraining batch drawn from inside the masks (the rest uniformly over
+    /// the images; 0: all uniform, as IDR).
+    #[arg(long, default_value_t = 0.0)]
+    pub mask_rays: f32,
     /// Adam learning rate (0: 5e-3 grid / 1e-4 mlp pretraining, 5e-3 grid / 1e-3 mlp
     /// stylizing).
     #[arg(long, default_value_t = 0.0)]
@@ -54,12 +58,20 @@ pub struct IdrRunConfig {
     /// gave 19.87 dB held-out masked PSNR where 64 with a 1024 grid gave 18.23.
     #[arg(long, default_value_t = 128)]
     pub color_width: usize,
+    /// Finest resolution of an appearance hash grid in the colour network (0: none).
+    #[arg(long, default_value_t = 0)]
+    pub color_grid: u32,
     /// Weight of the mask loss (IDR: 100).
     #[arg(long, default_value_t = 100.0)]
     pub mask_weight: f64,
     /// Weight of the eikonal loss (IDR: 0.1).
     #[arg(long, default_value_t = 0.1)]
     pub eikonal_weight: f64,
+    /// Random points of the unit sphere's box per pretraining step where the eikonal loss
+    /// holds the field to a distance (IDR: as many as rays). Each costs a forward-mode
+    /// gradient and its backward; the surface points count too.
+    #[arg(long, default_value_t = 512)]
+    pub eikonal_points: usize,
     /// Steps between evaluations on held-out views (0: only at the end).
     #[arg(long, default_value_t = 500)]
     pub eval_every: usize,
@@ -142,6 +154,7 @@ impl IdrRunConfig {
             radius: self.init_radius,
             grid_max_resolution: self.grid_max_resolution,
             color_width: self.color_width,
+            color_grid: self.color_grid,
         }
     }
 

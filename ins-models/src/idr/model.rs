@@ -98,6 +98,9 @@ pub struct IdrArch {
     pub grid_max_resolution: u32,
     /// Hidden width of the colour network (`grid`; the `mlp` SDF keeps IDR's).
     pub color_width: usize,
+    /// Finest resolution of the colour network's appearance grid (0: none).
+    #[serde(default)]
+    pub color_grid: u32,
 }
 
 impl IdrArch {
@@ -109,8 +112,24 @@ impl IdrArch {
             .with_max_resolution(self.grid_max_resolution)
     }
 
-    /// Checks the `grid` SDF's encoding against what the hash grid supports.
+    /// The colour network's appearance grid, when there is one. Its table is larger than the
+    /// SDF's (2^19 entries a level, 16.8 M parameters): texture needs the capacity, and a
+    /// collision there blurs a colour rather than bending the surface.
+    fn color_hash_grid(&self) -> Option<HashGridConfig> {
+        (self.color_grid > 0).then(|| {
+            HashGridConfig::new()
+                .with_log2_table(19)
+                .with_base_resolution(16)
+                .with_max_resolution(self.color_grid)
+        })
+    }
+
+    /// Checks the hash encodings against what the hash grid supports.
     pub fn validate(&self) -> Result<(), String> {
+        if let Some(grid) = self.color_hash_grid() {
+            grid.validate()
+                .map_err(|e| format!("--color-grid {}: {e}", self.color_grid))?;
+        }
         match self.sdf {
             SdfKind::Grid => self
                 .hash_grid()
@@ -128,7 +147,9 @@ impl IdrModel {
             SdfKind::Mlp => {
                 let s = SdfMlpConfig::new().with_radius(arch.radius).init(device);
                 let net = SdfNet::Mlp(s);
-                let c = SurfaceColorConfig::new(net.d_features()).init(device);
+                let c = SurfaceColorConfig::new(net.d_features())
+                    .with_grid(arch.color_hash_grid())
+                    .init(device);
                 (net, c)
             }
             SdfKind::Grid => {
@@ -140,6 +161,7 @@ impl IdrModel {
                 // One octave of view direction: with the grid's sharper features, more octaves let
                 // the colour fit each training view on its own and miss the views between them.
                 let c = SurfaceColorConfig::new(net.d_features())
+                    .with_grid(arch.color_hash_grid())
                     .with_d_hidden(arch.color_width)
                     .with_depth(2)
                     .with_dir_freqs(1)

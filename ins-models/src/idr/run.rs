@@ -74,6 +74,12 @@ pub fn pretrain(
 ) -> Result<TrainOutcome<IdrModel>> {
     let scene_path = cfg.scene.clone().context("pretraining needs --scene DIR")?;
     cfg.arch().validate().map_err(anyhow::Error::msg)?;
+    if !(0.0..=1.0).contains(&cfg.mask_rays) {
+        bail!(
+            "--mask-rays {}: the share of rays inside the masks is from 0 to 1",
+            cfg.mask_rays
+        );
+    }
     let (scene, factor) = load_scene(&scene_path, cfg.downscale, cfg.holdout, cfg.no_mask)?;
     let mut cfg = cfg.clone();
     cfg.downscale = factor;
@@ -94,7 +100,9 @@ pub fn pretrain(
         views,
         out.join("val"),
         &ad,
-    );
+    )
+    .with_mask_rays(cfg.mask_rays)?;
+    task.eikonal_points = cfg.eikonal_points;
     let mut phase = Phase::new("pretrain", IdrObjective::Pretrain, cfg.steps, cfg.lr)
         .schedule(LrSchedule {
             base: cfg.lr,

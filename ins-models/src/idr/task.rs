@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use burn::prelude::*;
 use ins_core::data::{Scene, Split};
 use ins_core::loss::{content_loss, psnr, style_loss};
+use ins_core::render::mask_sampler::MaskedPixels;
 use ins_core::render::patches::{PatchSampler, PatchSpec};
 use ins_core::render::rays::RaySampler;
 use ins_core::render::sphere_tracing::TraceOptions;
@@ -53,6 +54,8 @@ pub struct IdrTask {
     pub scene: Scene,
     /// Rays per pretraining step.
     pub rays: usize,
+    /// Random points per pretraining step for the eikonal loss.
+    pub eikonal_points: usize,
     /// Steps of the pretraining phase (the mask loss sharpens over them).
     pub steps: usize,
     /// Whether masks are used.
@@ -67,6 +70,8 @@ pub struct IdrTask {
     pub eval_dir: PathBuf,
     /// Ray tracer settings.
     pub trace: TraceOptions,
+    /// Pretraining rays drawn inside the masks: the share and the index of mask pixels.
+    pub mask_rays: Option<(f32, MaskedPixels)>,
     device: Device,
 }
 
@@ -87,6 +92,7 @@ impl IdrTask {
         Self {
             scene,
             rays,
+            eikonal_points: 512,
             steps,
             masked,
             style,
@@ -94,8 +100,19 @@ impl IdrTask {
             eval_views,
             eval_dir,
             trace: TraceOptions::default(),
+            mask_rays: None,
             device: device.clone(),
         }
+    }
+
+    /// Draws `share` of each pretraining batch from inside the masks (0 or no masks: uniform).
+    pub fn with_mask_rays(mut self, share: f32) -> Result<Self> {
+        self.mask_rays = if self.masked && share > 0.0 {
+            Some((share, MaskedPixels::new(&self.scene, Split::Train)?))
+        } else {
+            None
+        };
+        Ok(self)
     }
 
     /// IDR's mask sharpness α: 50, doubling at each fifth of pretraining (up to 1600).
@@ -105,7 +122,10 @@ impl IdrTask {
     }
 
     fn pretrain_losses(&self, model: &IdrModel, step: usize, seed: u64) -> Result<LossTerms> {
-        let batch = RaySampler::new(self.rays, seed).sample(&self.scene, Split::Train)?;
+        let batch = match &self.mask_rays {
+            Some((share, index)) => index.sample(&self.scene, self.rays, *share, seed)?,
+            None => RaySampler::new(self.rays, seed).sample(&self.scene, Split::Train)?,
+        };
         let r = batch.len();
         let out = render_surface(
             model,
@@ -179,18 +199,21 @@ impl IdrTask {
         }
         // Eikonal: |∇f| = 1 at random points of the unit sphere's box and at the surface points.
         let mut rng = SmallRng::seed_from_u64(seed ^ 0xe1c0);
-        let k = r.min(4096);
+        let k = self.eikonal_points;
         let pts: Vec<f32> = (0..k * 3)
             .map(|_| rng.random::<f32>() * 2.0 - 1.0)
             .collect();
-        let (_, _, g) = model.sdf.forward_with_gradient(
-            Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]),
-        );
-        let g = match out.surface_gradients {
-            Some(gs) => Tensor::cat(vec![g, gs], 0),
-            None => g,
+        let random = (k > 0).then(|| {
+            let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]);
+            model.sdf.forward_with_gradient(x).2
+        });
+        let gradients: Vec<Tensor<2>> = random.into_iter().chain(out.surface_gradients).collect();
+        let eik = if gradients.is_empty() {
+            Tensor::<1>::zeros([1], &self.device)
+        } else {
+            let g = Tensor::cat(gradients, 0);
+            g.square().sum_dim(1).sqrt().sub_scalar(1.0).square().mean()
         };
-        let eik = g.square().sum_dim(1).sqrt().sub_scalar(1.0).square().mean();
         Ok(terms.term("eikonal", eik))
     }
 
