@@ -37,7 +37,7 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     let scene = dir.path().join("scene");
     // 24 views, 18 of them for training: with 16 (12 for training) the held-out PSNR inside the
     // mask sat 0.1 to 0.4 dB above the bar below and moved by as much with any change to the
-    // tracer; 24 views give 15.1 dB at the same number of steps, a decibel clear of it.
+    // tracer; 24 views give 15.8 dB at the same number of steps, clear of it.
     write_dtu(
         &scene,
         &SynthOptions {

@@ -92,7 +92,7 @@ impl IdrTask {
         Self {
             scene,
             rays,
-            eikonal_points: 512,
+            eikonal_points: 2048,
             steps,
             masked,
             style,
