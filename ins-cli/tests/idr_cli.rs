@@ -173,6 +173,21 @@ fn train_render_eval_export_and_refuse_bad_input() {
     ]);
     assert_clean_failure(&o, "--grid-max-resolution 5000");
     assert!(!too_fine.join("config.json").exists());
+    // So are a colour grid out of range and a share of rays that is not one.
+    for (flag, value) in [("--color-grid", "4096"), ("--mask-rays", "1.5")] {
+        let o = cli(&[
+            "train",
+            "idr",
+            "--scene",
+            s(&scene),
+            flag,
+            value,
+            "--out",
+            s(&too_fine),
+        ]);
+        assert_clean_failure(&o, &format!("{flag} {value}"));
+        assert!(!too_fine.join("config.json").exists());
+    }
     let nerf_like = dir.path().join("nerf_like");
     std::fs::create_dir_all(&nerf_like).unwrap();
     std::fs::write(
