@@ -7,6 +7,7 @@ use std::str::FromStr;
 
 use serde::Serialize;
 
+use super::error::DataError;
 use super::images::{Image, Mask};
 use crate::render::camera::Camera;
 use crate::render::geometry::{Bounds, Similarity, Vec3};
@@ -179,6 +180,19 @@ impl Scene {
             Split::Val => &self.val,
             Split::Test => &self.test,
         }
+    }
+
+    /// View indices of a split, or an error naming the scene when it has none (samplers need
+    /// at least one view to draw from).
+    pub fn views_of(&self, split: Split) -> Result<&[usize], DataError> {
+        let views = self.split(split);
+        if views.is_empty() {
+            return Err(DataError::Request(format!(
+                "split {split} of {} has no views",
+                self.root.display()
+            )));
+        }
+        Ok(views)
     }
 
     /// Interval `(near, far)` of the ray `o + t·d` (unit `d`). With [`Scene::per_ray_range`]:

@@ -21,13 +21,7 @@ pub struct MaskedPixels {
 impl MaskedPixels {
     /// Indexes the masks of `split` (a view without a mask counts as all object).
     pub fn new(scene: &Scene, split: Split) -> Result<Self, DataError> {
-        let views = scene.split(split).to_vec();
-        if views.is_empty() {
-            return Err(DataError::Request(format!(
-                "split {split} of {} has no views",
-                scene.root.display()
-            )));
-        }
+        let views = scene.views_of(split)?.to_vec();
         let inside = views
             .iter()
             .map(|&v| {

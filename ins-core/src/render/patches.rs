@@ -145,13 +145,7 @@ impl PatchSampler {
     /// Draws one patch from the views of `split`. Errors when the split is empty, K or s is 0,
     /// or the window does not fit the images.
     pub fn sample(&mut self, scene: &Scene, split: Split) -> Result<Patch, DataError> {
-        let views = scene.split(split);
-        if views.is_empty() {
-            return Err(DataError::Request(format!(
-                "split {split} of {} has no views",
-                scene.root.display()
-            )));
-        }
+        let views = scene.views_of(split)?;
         let mut redraws = 0;
         let mut best: Option<(f32, Patch)> = None;
         loop {

@@ -231,13 +231,7 @@ impl RaySampler {
 
     /// One batch from the views of `split`.
     pub fn sample(&mut self, scene: &Scene, split: Split) -> Result<RayBatch, DataError> {
-        let views = scene.split(split);
-        if views.is_empty() {
-            return Err(DataError::Request(format!(
-                "split {split} of {} has no views",
-                scene.root.display()
-            )));
-        }
+        let views = scene.views_of(split)?;
         let mut pixels = Vec::with_capacity(self.batch_size);
         for _ in 0..self.batch_size {
             let view = views[self.rng.random_range(0..views.len())];
