@@ -115,6 +115,12 @@ struct MarchMinimum {
 
 impl MarchMinimum {
     const NONE: (f32, f32) = (f32::NAN, f32::NAN);
+    /// Before the first sample.
+    const EMPTY: Self = Self {
+        before: Self::NONE,
+        at: Self::NONE,
+        after: Self::NONE,
+    };
 
     /// Takes the next march sample `(t, f)`, `previous` being the one before it.
     fn offer(&mut self, previous: (f32, f32), sample: (f32, f32)) {
@@ -217,14 +223,7 @@ pub fn sphere_trace(
     let mut exited = vec![false; n];
     // The last sample of each ray, outside the surface.
     let mut last = vec![(0f32, f32::NAN); n];
-    let mut march_min = vec![
-        MarchMinimum {
-            before: MarchMinimum::NONE,
-            at: MarchMinimum::NONE,
-            after: MarchMinimum::NONE,
-        };
-        n
-    ];
+    let mut march_min = vec![MarchMinimum::EMPTY; n];
     let mut active: Vec<usize> = (0..n).filter(|&i| rays.far[i] > rays.near[i]).collect();
     let mut points = Vec::new();
     // 1. Sphere tracing from the near end.
@@ -280,30 +279,23 @@ pub fn sphere_trace(
         }
         b
     };
+    let clear: Vec<bool> = (0..n)
+        .map(|i| exited[i] && closest.f[i] > opts.clear_miss)
+        .collect();
     let stretches: Vec<Stretch> = (0..n)
         .filter(|&i| !hit[i] && !bracketed[i] && rays.far[i] > rays.near[i])
-        .map(|i| {
-            let clear = exited[i] && closest.f[i] > opts.clear_miss;
-            Stretch {
-                ray: i,
-                t0: rays.near[i],
-                t1: rays.far[i],
-                count: if clear {
-                    opts.coarse_samples
-                } else {
-                    opts.samples
-                },
-            }
+        .map(|i| Stretch {
+            ray: i,
+            t0: rays.near[i],
+            t1: rays.far[i],
+            count: if clear[i] {
+                opts.coarse_samples
+            } else {
+                opts.samples
+            },
         })
         .filter(|s| s.count >= 2)
         .collect();
-    let clear: Vec<bool> = {
-        let mut c = vec![false; n];
-        for s in &stretches {
-            c[s.ray] = exited[s.ray] && closest.f[s.ray] > opts.clear_miss;
-        }
-        c
-    };
     let (found, open) = search(rays, &stretches, &mut closest, &mut sdf);
     brackets.extend(found);
     // A finer look around the closest sample of each fully searched ray without a crossing.
