@@ -48,6 +48,11 @@ pub struct IdrRunConfig {
     /// stylizing).
     #[arg(long, default_value_t = 0.0)]
     pub lr: f64,
+    /// Pretraining: the learning rate falls exponentially to this fraction of `--lr` by the
+    /// last step. On scan37 at 400×300 over 4000 steps, 0.1 gave 18.37 dB held-out masked PSNR
+    /// and 0.01 gave 17.56.
+    #[arg(long, default_value_t = 0.1)]
+    pub lr_decay: f64,
     /// Radius of the initial sphere.
     #[arg(long, default_value_t = 0.6)]
     pub init_radius: f64,

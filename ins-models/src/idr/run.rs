@@ -80,6 +80,12 @@ pub fn pretrain(
             cfg.mask_rays
         );
     }
+    if !(cfg.lr_decay > 0.0 && cfg.lr_decay <= 1.0) {
+        bail!(
+            "--lr-decay {}: the final learning rate is a fraction of the first, above 0 and at most 1",
+            cfg.lr_decay
+        );
+    }
     let (scene, factor) = load_scene(&scene_path, cfg.downscale, cfg.holdout, cfg.no_mask)?;
     let mut cfg = cfg.clone();
     cfg.downscale = factor;
@@ -106,7 +112,7 @@ pub fn pretrain(
     let mut phase = Phase::new("pretrain", IdrObjective::Pretrain, cfg.steps, cfg.lr)
         .schedule(LrSchedule {
             base: cfg.lr,
-            decay: 0.1,
+            decay: cfg.lr_decay,
             decay_steps: cfg.steps as f64,
         })
         .weight("rgb", 1.0)
