@@ -25,7 +25,8 @@ use vgg_import::Vgg16Features;
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Workloads: vgg, vgg-layers (per-convolution profile), siren, nerf-pretrain, nerf-stylize,
-    /// nerf-grid, hash-grid, hash-grid-reference (default: the first five of BENCHMARKS.md).
+    /// nerf-grid, hash-grid, hash-grid-reference, idr-pretrain (default: the first five of
+    /// BENCHMARKS.md).
     workloads: Vec<String>,
     /// Backend.
     #[arg(long, default_value = "flex")]
@@ -66,8 +67,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "nerf-grid" => bench_nerf_grid(&device, args.steps)?,
             "hash-grid" => bench_hash_grid(&device, args.steps, true)?,
             "hash-grid-reference" => bench_hash_grid(&device, args.steps, false)?,
+            "idr-pretrain" => crate::bench_idr::bench_idr_pretrain(&device, args.steps)?,
             other => bail!(
-                "unknown workload {other:?} (known: vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, hash-grid, hash-grid-reference)"
+                "unknown workload {other:?} (known: vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, hash-grid, hash-grid-reference, idr-pretrain)"
             ),
         };
         let mut sorted = times.clone();
@@ -99,6 +101,7 @@ fn rays_per_step(w: &str) -> Option<usize> {
         "nerf-pretrain" | "nerf-stylize" => Some(1024),
         "nerf-grid" => Some(GRID_RAYS),
         "hash-grid" | "hash-grid-reference" => Some(GRID_POINTS),
+        "idr-pretrain" => Some(crate::bench_idr::rays()),
         _ => None,
     }
 }
@@ -111,7 +114,7 @@ fn peak_rss_mb() -> Option<f64> {
     Some((kb / 1024.0).round())
 }
 
-fn timed(steps: usize, mut step: impl FnMut() -> Result<()>) -> Result<Vec<f64>> {
+pub fn timed(steps: usize, mut step: impl FnMut() -> Result<()>) -> Result<Vec<f64>> {
     step()?;
     let mut times = Vec::with_capacity(steps);
     for _ in 0..steps.max(1) {

@@ -2,6 +2,7 @@
 //! representations.
 
 mod bench;
+mod bench_idr;
 mod bench_vgg_layers;
 mod consistency_cmd;
 mod data_cmd;

@@ -173,8 +173,13 @@ fn train_render_eval_export_and_refuse_bad_input() {
     ]);
     assert_clean_failure(&o, "--grid-max-resolution 5000");
     assert!(!too_fine.join("config.json").exists());
-    // So are a colour grid out of range and a share of rays that is not one.
-    for (flag, value) in [("--color-grid", "4096"), ("--mask-rays", "1.5")] {
+    // So are a colour grid out of range, a share of rays that is not one and a learning-rate
+    // decay that is not a fraction.
+    for (flag, value) in [
+        ("--color-grid", "4096"),
+        ("--mask-rays", "1.5"),
+        ("--lr-decay", "0"),
+    ] {
         let o = cli(&[
             "train",
             "idr",
@@ -223,4 +228,17 @@ fn train_render_eval_export_and_refuse_bad_input() {
         before,
         "the refused export wrote over the mesh"
     );
+}
+
+#[test]
+fn bench_idr_pretrain_reports_a_step_time_and_its_rays() {
+    let o = cli(&["bench", "idr-pretrain", "--steps", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let line: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(line["workload"], "idr-pretrain");
+    let ms = line["ms_per_step"].as_f64().unwrap();
+    assert!(ms > 0.0, "{line}");
+    // 2048 rays (the pretraining default) in that time.
+    let rays_per_s = line["rays_per_s"].as_f64().unwrap();
+    assert!((rays_per_s - 2048.0 / ms * 1e3).abs() <= 0.01 * rays_per_s + 1.0, "{line}");
 }

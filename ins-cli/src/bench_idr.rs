@@ -1,0 +1,87 @@
+//! `ins-cli bench idr-pretrain`: one IDR pretraining step with `train idr`'s defaults, on a
+//! synthetic DTU scene at 400×300 (the size of scan37 in the README): sphere tracing of the
+//! rays, the differentiable surface point, colour, mask and eikonal losses, backward, Adam.
+
+use anyhow::{Context, Result};
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::prelude::*;
+use ins_core::data::synthetic::{SynthOptions, write_dtu};
+use ins_core::train::{Phase, StepContext, Task};
+use ins_models::idr::config::{IdrKind, IdrRunConfig};
+use ins_models::idr::model::IdrModel;
+use ins_models::idr::run::load_scene;
+use ins_models::idr::task::{IdrObjective, IdrTask};
+
+use crate::bench::timed;
+
+/// Rays of an `idr-pretrain` step (`train idr`'s default).
+pub fn rays() -> usize {
+    IdrRunConfig::default().rays
+}
+
+/// Times `steps` pretraining steps; the scene is written to a temporary folder first.
+pub fn bench_idr_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
+    let cfg = IdrRunConfig::default();
+    let dir = tempfile::tempdir().context("a temporary folder for the synthetic scene")?;
+    write_dtu(
+        dir.path(),
+        &SynthOptions {
+            size: 400,
+            views: 8,
+        },
+    )?;
+    let (scene, _) = load_scene(dir.path(), 1, 0, false)?;
+    let total_steps = cfg.steps_for(IdrKind::Pretrain);
+    let mut task = IdrTask::new(
+        scene,
+        cfg.rays,
+        total_steps,
+        true,
+        None,
+        0,
+        Vec::new(),
+        dir.path().join("val"),
+        device,
+    );
+    task.eikonal_points = cfg.eikonal_points;
+    let phase = Phase::new(
+        "pretrain",
+        IdrObjective::Pretrain,
+        total_steps,
+        cfg.lr_for(IdrKind::Pretrain),
+    );
+    let mut model = Some(IdrModel::new(&cfg.arch(), device));
+    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut step = 0;
+    timed(steps, || {
+        let m = model.take().context("model")?;
+        let ctx = StepContext {
+            phase: &phase,
+            step_in_phase: step,
+            global_step: step,
+            seed: step as u64,
+        };
+        step += 1;
+        let terms = task.losses(&m, &ctx)?;
+        let loss = terms
+            .terms
+            .into_iter()
+            .map(|(name, t)| match name {
+                "mask" => t.mul_scalar(cfg.mask_weight),
+                "eikonal" => t.mul_scalar(cfg.eikonal_weight),
+                "mse_mask" => t.mul_scalar(0.0),
+                _ => t,
+            })
+            .reduce(|a, b| a + b)
+            .context("no loss terms")?;
+        let grads = GradientsParams::from_grads(loss.backward(), &m);
+        let m = adam.step(cfg.lr_for(IdrKind::Pretrain), m, grads);
+        // Wait for the update to land before the clock stops.
+        let _ = m
+            .sdf
+            .sdf(Tensor::<2>::zeros([1, 3], device))
+            .into_scalar::<f32>();
+        model = Some(m);
+        Ok(())
+    })
+}
