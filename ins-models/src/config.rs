@@ -28,16 +28,52 @@ pub fn read_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
     serde_json::from_str(&text).with_context(|| format!("{}: malformed config", path.display()))
 }
 
-/// Writes a run's `config.json` into `out`, or, resuming, checks that the run was started with
-/// the same configuration (a resumed run with other options would silently be another run).
+/// Config fields that name files or folders (a string or a list of strings).
+const PATH_FIELDS: [&str; 4] = ["scene", "from", "styles", "content"];
+
+/// `cfg` as JSON with its [`PATH_FIELDS`] made absolute (against the current directory), so
+/// that a run folder can be evaluated, rendered, resumed or stylized from any directory.
+fn with_absolute_paths<T: Serialize>(cfg: &T) -> Result<serde_json::Value> {
+    fn absolute(p: &mut String) -> Result<()> {
+        let path = Path::new(p.as_str());
+        let abs = path
+            .canonicalize()
+            .or_else(|_| std::path::absolute(path))
+            .with_context(|| format!("making {p} an absolute path"))?;
+        *p = abs.to_string_lossy().into_owned();
+        Ok(())
+    }
+    let mut value = serde_json::to_value(cfg)?;
+    if let serde_json::Value::Object(fields) = &mut value {
+        for key in PATH_FIELDS {
+            match fields.get_mut(key) {
+                Some(serde_json::Value::String(p)) => absolute(p)?,
+                Some(serde_json::Value::Array(items)) => {
+                    for item in items {
+                        if let serde_json::Value::String(p) = item {
+                            absolute(p)?;
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(value)
+}
+
+/// Writes a run's `config.json` into `out`, paths absolute, or, resuming, checks that the run
+/// was started with the same configuration (a resumed run with other options would silently be
+/// another run).
 pub fn write_run_config<T>(cfg: &T, out: &Path, resume: bool) -> Result<()>
 where
     T: Serialize + DeserializeOwned + PartialEq,
 {
     let path = out.join("config.json");
+    let value = with_absolute_paths(cfg)?;
     if resume && path.exists() {
         let saved: T = read_json(&path)?;
-        if saved != *cfg {
+        if with_absolute_paths(&saved)? != value {
             anyhow::bail!(
                 "{}: the run was started with another configuration; resume with the same options (or --config {})",
                 path.display(),
@@ -46,7 +82,7 @@ where
         }
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    ins_io::write_atomic(&path, serde_json::to_string_pretty(cfg)?.as_bytes())?;
+    ins_io::write_atomic(&path, serde_json::to_string_pretty(&value)?.as_bytes())?;
     Ok(())
 }
 
@@ -144,6 +180,26 @@ mod tests {
                 styles: vec!["b.png".into()]
             }
         );
+    }
+
+    #[test]
+    fn run_configs_keep_absolute_paths_and_resume_from_relative_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("run");
+        let cfg = Demo {
+            steps: 3,
+            lr: 0.5,
+            styles: vec!["some/style.png".into()],
+        };
+        write_run_config(&cfg, &out, false).unwrap();
+        let saved: Demo = read_json(&out.join("config.json")).unwrap();
+        let expected = std::env::current_dir().unwrap().join("some/style.png");
+        assert_eq!(saved.styles, vec![expected.to_string_lossy().into_owned()]);
+        // The same relative options resume the run; other ones are refused.
+        write_run_config(&cfg, &out, true).unwrap();
+        let other = Demo { steps: 4, ..cfg };
+        let e = format!("{:#}", write_run_config(&other, &out, true).unwrap_err());
+        assert!(e.contains("another configuration"), "{e}");
     }
 
     #[test]
