@@ -240,5 +240,8 @@ fn bench_idr_pretrain_reports_a_step_time_and_its_rays() {
     assert!(ms > 0.0, "{line}");
     // 2048 rays (the pretraining default) in that time.
     let rays_per_s = line["rays_per_s"].as_f64().unwrap();
-    assert!((rays_per_s - 2048.0 / ms * 1e3).abs() <= 0.01 * rays_per_s + 1.0, "{line}");
+    assert!(
+        (rays_per_s - 2048.0 / ms * 1e3).abs() <= 0.01 * rays_per_s + 1.0,
+        "{line}"
+    );
 }
