@@ -6,11 +6,10 @@ use anyhow::{Context, Result};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
 use ins_core::data::synthetic::{SynthOptions, write_dtu};
-use ins_core::train::{Phase, StepContext, Task};
+use ins_core::train::{StepContext, Task};
 use ins_models::idr::config::{IdrKind, IdrRunConfig};
 use ins_models::idr::model::IdrModel;
-use ins_models::idr::run::load_scene;
-use ins_models::idr::task::{IdrObjective, IdrTask};
+use ins_models::idr::run::{load_scene, pretrain_phase, pretrain_task};
 
 use crate::bench::timed;
 
@@ -21,7 +20,9 @@ pub fn rays() -> usize {
 
 /// Times `steps` pretraining steps; the scene is written to a temporary folder first.
 pub fn bench_idr_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
-    let cfg = IdrRunConfig::default();
+    let mut cfg = IdrRunConfig::default();
+    cfg.steps = cfg.steps_for(IdrKind::Pretrain);
+    cfg.lr = cfg.lr_for(IdrKind::Pretrain);
     let dir = tempfile::tempdir().context("a temporary folder for the synthetic scene")?;
     write_dtu(
         dir.path(),
@@ -31,25 +32,8 @@ pub fn bench_idr_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
         },
     )?;
     let (scene, _) = load_scene(dir.path(), 1, 0, false)?;
-    let total_steps = cfg.steps_for(IdrKind::Pretrain);
-    let mut task = IdrTask::new(
-        scene,
-        cfg.rays,
-        total_steps,
-        true,
-        None,
-        0,
-        Vec::new(),
-        dir.path().join("val"),
-        device,
-    );
-    task.eikonal_points = cfg.eikonal_points;
-    let phase = Phase::new(
-        "pretrain",
-        IdrObjective::Pretrain,
-        total_steps,
-        cfg.lr_for(IdrKind::Pretrain),
-    );
+    let mut task = pretrain_task(&cfg, scene, Vec::new(), dir.path().join("val"), device)?;
+    let phase = pretrain_phase(&cfg);
     let mut model = Some(IdrModel::new(&cfg.arch(), device));
     let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
     let mut step = 0;
@@ -62,20 +46,15 @@ pub fn bench_idr_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
             seed: step as u64,
         };
         step += 1;
-        let terms = task.losses(&m, &ctx)?;
-        let loss = terms
+        let loss = task
+            .losses(&m, &ctx)?
             .terms
             .into_iter()
-            .map(|(name, t)| match name {
-                "mask" => t.mul_scalar(cfg.mask_weight),
-                "eikonal" => t.mul_scalar(cfg.eikonal_weight),
-                "mse_mask" => t.mul_scalar(0.0),
-                _ => t,
-            })
+            .map(|(name, t)| t.mul_scalar(phase.weight_of(name)))
             .reduce(|a, b| a + b)
             .context("no loss terms")?;
         let grads = GradientsParams::from_grads(loss.backward(), &m);
-        let m = adam.step(cfg.lr_for(IdrKind::Pretrain), m, grads);
+        let m = adam.step(cfg.lr, m, grads);
         // Wait for the update to land before the clock stops.
         let _ = m
             .sdf

@@ -96,6 +96,24 @@ pub fn pretrain(
     let ad = device.clone().autodiff();
     let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || IdrModel::new(&cfg.arch(), &ad));
     let views = scene.split(Split::Val).to_vec();
+    let mut task = pretrain_task(&cfg, scene, views, out.join("val"), &ad)?;
+    let phase = pretrain_phase(&cfg);
+    let outcome = Trainer::new(vec![phase], opts).run(&mut task, model)?;
+    if outcome.finished {
+        final_pictures(&outcome.model, &task, &out, device)?;
+    }
+    Ok(outcome)
+}
+
+/// The pretraining task of `cfg` (steps resolved) on `scene`: its rays, masks and eikonal
+/// points, scoring `views` every `cfg.eval_every` steps into `val_dir`.
+pub fn pretrain_task(
+    cfg: &IdrRunConfig,
+    scene: Scene,
+    views: Vec<usize>,
+    val_dir: PathBuf,
+    device: &Device,
+) -> Result<IdrTask> {
     let mut task = IdrTask::new(
         scene,
         cfg.rays,
@@ -104,12 +122,18 @@ pub fn pretrain(
         None,
         cfg.eval_every,
         views,
-        out.join("val"),
-        &ad,
+        val_dir,
+        device,
     )
     .with_mask_rays(cfg.mask_rays)?;
     task.eikonal_points = cfg.eikonal_points;
-    let mut phase = Phase::new("pretrain", IdrObjective::Pretrain, cfg.steps, cfg.lr)
+    Ok(task)
+}
+
+/// The pretraining phase of `cfg` (steps and learning rate resolved): the decaying learning
+/// rate and the weights of the colour, mask and eikonal terms.
+pub fn pretrain_phase(cfg: &IdrRunConfig) -> Phase<IdrObjective> {
+    let phase = Phase::new("pretrain", IdrObjective::Pretrain, cfg.steps, cfg.lr)
         .schedule(LrSchedule {
             base: cfg.lr,
             decay: cfg.lr_decay,
@@ -118,14 +142,11 @@ pub fn pretrain(
         .weight("rgb", 1.0)
         .weight("mse_mask", 0.0)
         .weight("eikonal", cfg.eikonal_weight);
-    if !cfg.no_mask {
-        phase = phase.weight("mask", cfg.mask_weight);
+    if cfg.no_mask {
+        phase
+    } else {
+        phase.weight("mask", cfg.mask_weight)
     }
-    let outcome = Trainer::new(vec![phase], opts).run(&mut task, model)?;
-    if outcome.finished {
-        final_pictures(&outcome.model, &task, &out, device)?;
-    }
-    Ok(outcome)
 }
 
 fn final_pictures(model: &IdrModel, task: &IdrTask, out: &Path, device: &Device) -> Result<()> {
