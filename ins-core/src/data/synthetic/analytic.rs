@@ -1,0 +1,374 @@
+//! The analytic scene: primitives with textures, ray-cast with exact depth, normals and masks.
+
+use crate::render::camera::Camera;
+use crate::render::geometry::{Similarity, Vec3};
+
+/// A primitive, in the scene's local frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    /// A sphere.
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+    },
+    /// An axis-aligned box.
+    Box {
+        /// Minimum corner.
+        min: Vec3,
+        /// Maximum corner.
+        max: Vec3,
+    },
+    /// An infinite plane.
+    Plane {
+        /// A point on it.
+        point: Vec3,
+        /// Its normal.
+        normal: Vec3,
+    },
+}
+
+/// Surface colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Texture {
+    /// One colour.
+    Solid(Vec3),
+    /// A 3D checkerboard of two colours with cells of side `size` (local units).
+    Checker {
+        /// First colour.
+        a: Vec3,
+        /// Second colour.
+        b: Vec3,
+        /// Cell size.
+        size: f32,
+    },
+}
+
+/// A textured primitive.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Object {
+    /// Geometry.
+    pub shape: Shape,
+    /// Colour.
+    pub texture: Texture,
+    /// Whether it counts as foreground in masks and alpha (ground and backdrop planes do not).
+    pub foreground: bool,
+}
+
+/// A set of objects placed in the world by a similarity.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AnalyticScene {
+    /// Objects, in local coordinates.
+    pub objects: Vec<Object>,
+    /// Local → world map.
+    pub to_world: Similarity,
+}
+
+/// The first surface a ray meets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the (unit) world ray.
+    pub t: f32,
+    /// World position.
+    pub point: Vec3,
+    /// Index into [`AnalyticScene::objects`].
+    pub object: usize,
+    /// Shaded colour.
+    pub rgb: Vec3,
+}
+
+/// A ray-cast image with exact per-pixel geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rendering {
+    /// Width.
+    pub width: u32,
+    /// Height.
+    pub height: u32,
+    /// Colour, `h·w·3`; black where nothing is hit.
+    pub rgb: Vec<f32>,
+    /// Distance along the unit world ray of the pixel centre; infinite where nothing is hit.
+    pub depth: Vec<f32>,
+    /// Which object was hit, if any.
+    pub object: Vec<Option<usize>>,
+    /// Whether a foreground object was hit.
+    pub mask: Vec<bool>,
+}
+
+impl Rendering {
+    /// Whether pixel `(x, y)` and its 8 neighbours all see the same foreground object: a pixel
+    /// safely away from silhouettes, for tests.
+    pub fn is_interior(&self, x: u32, y: u32) -> bool {
+        if x == 0 || y == 0 || x + 1 >= self.width || y + 1 >= self.height {
+            return false;
+        }
+        let i = (y * self.width + x) as usize;
+        let Some(o) = self.object[i] else {
+            return false;
+        };
+        if !self.mask[i] {
+            return false;
+        }
+        for dy in -1i32..=1 {
+            for dx in -1i32..=1 {
+                let j = ((y as i32 + dy) as u32 * self.width + (x as i32 + dx) as u32) as usize;
+                if self.object[j] != Some(o) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+}
+
+impl AnalyticScene {
+    /// Spheres and boxes inside the unit ball (radius ≤ 0.95), on a ground plane `z = −0.55`
+    /// when `ground` is true; local z is up.
+    pub fn tabletop(ground: bool) -> Self {
+        let red = Vec3::new(0.85, 0.2, 0.15);
+        let white = Vec3::new(0.95, 0.95, 0.9);
+        let mut objects = vec![
+            Object {
+                shape: Shape::Sphere {
+                    center: Vec3::new(0.0, 0.0, 0.0),
+                    radius: 0.45,
+                },
+                texture: Texture::Checker {
+                    a: red,
+                    b: white,
+                    size: 0.15,
+                },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Box {
+                    min: Vec3::new(0.25, 0.15, -0.55),
+                    max: Vec3::new(0.6, 0.5, -0.2),
+                },
+                texture: Texture::Checker {
+                    a: Vec3::new(0.1, 0.6, 0.2),
+                    b: Vec3::new(0.9, 0.8, 0.2),
+                    size: 0.1,
+                },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Sphere {
+                    center: Vec3::new(-0.45, 0.35, -0.3),
+                    radius: 0.2,
+                },
+                texture: Texture::Solid(Vec3::new(0.15, 0.3, 0.9)),
+                foreground: true,
+            },
+        ];
+        if ground {
+            objects.push(Object {
+                shape: Shape::Plane {
+                    point: Vec3::new(0.0, 0.0, -0.55),
+                    normal: Vec3::new(0.0, 0.0, 1.0),
+                },
+                texture: Texture::Checker {
+                    a: Vec3::new(0.35, 0.3, 0.25),
+                    b: Vec3::new(0.6, 0.55, 0.5),
+                    size: 0.25,
+                },
+                foreground: false,
+            });
+        }
+        AnalyticScene {
+            objects,
+            to_world: Similarity::identity(),
+        }
+    }
+
+    /// A forward-facing arrangement for LLFF: objects 3–6 units down −z (local), a ground plane
+    /// `y = −1.5` and a backdrop `z = −8`, so every ray from near the origin hits something.
+    pub fn forward_facing() -> Self {
+        let objects = vec![
+            Object {
+                shape: Shape::Sphere {
+                    center: Vec3::new(0.0, 0.0, -4.0),
+                    radius: 0.8,
+                },
+                texture: Texture::Checker {
+                    a: Vec3::new(0.85, 0.2, 0.15),
+                    b: Vec3::new(0.95, 0.95, 0.9),
+                    size: 0.25,
+                },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Box {
+                    min: Vec3::new(-1.8, -1.5, -5.5),
+                    max: Vec3::new(-0.8, 0.2, -4.5),
+                },
+                texture: Texture::Checker {
+                    a: Vec3::new(0.1, 0.6, 0.2),
+                    b: Vec3::new(0.9, 0.8, 0.2),
+                    size: 0.3,
+                },
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Sphere {
+                    center: Vec3::new(1.3, 0.6, -3.2),
+                    radius: 0.5,
+                },
+                texture: Texture::Solid(Vec3::new(0.15, 0.3, 0.9)),
+                foreground: true,
+            },
+            Object {
+                shape: Shape::Plane {
+                    point: Vec3::new(0.0, -1.5, 0.0),
+                    normal: Vec3::new(0.0, 1.0, 0.0),
+                },
+                texture: Texture::Checker {
+                    a: Vec3::new(0.35, 0.3, 0.25),
+                    b: Vec3::new(0.6, 0.55, 0.5),
+                    size: 0.5,
+                },
+                foreground: false,
+            },
+            Object {
+                shape: Shape::Plane {
+                    point: Vec3::new(0.0, 0.0, -8.0),
+                    normal: Vec3::new(0.0, 0.0, 1.0),
+                },
+                texture: Texture::Checker {
+                    a: Vec3::new(0.5, 0.6, 0.8),
+                    b: Vec3::new(0.8, 0.85, 0.95),
+                    size: 0.7,
+                },
+                foreground: false,
+            },
+        ];
+        AnalyticScene {
+            objects,
+            to_world: Similarity::identity(),
+        }
+    }
+
+    /// First hit of the world ray `o + t·d` (unit `d`, `t > 0`).
+    pub fn trace(&self, o: Vec3, d: Vec3) -> Option<Hit> {
+        let s = &self.to_world;
+        let rt = s.rotation.transpose();
+        let ol = rt * (o - s.translation) / s.scale;
+        let dl = rt * d;
+        let mut best: Option<(f32, usize, Vec3)> = None;
+        for (i, obj) in self.objects.iter().enumerate() {
+            if let Some((t, n)) = intersect(&obj.shape, ol, dl)
+                && best.is_none_or(|b| t < b.0)
+            {
+                best = Some((t, i, n));
+            }
+        }
+        let (tl, i, n) = best?;
+        let pl = ol + dl * tl;
+        let n = if n.dot(dl) > 0.0 { -n } else { n };
+        let light = Vec3::new(0.3, 0.5, 0.8).normalize();
+        let shade = 0.45 + 0.55 * n.dot(light).max(0.0);
+        let base = match self.objects[i].texture {
+            Texture::Solid(c) => c,
+            Texture::Checker { a, b, size } => {
+                let k = (pl[0] / size).floor() + (pl[1] / size).floor() + (pl[2] / size).floor();
+                if (k as i64).rem_euclid(2) == 0 { a } else { b }
+            }
+        };
+        Some(Hit {
+            t: tl * s.scale,
+            point: s.apply_point(pl),
+            object: i,
+            rgb: base * shade,
+        })
+    }
+
+    /// Ray-casts the scene through every pixel centre of `camera`.
+    pub fn render(&self, camera: &Camera) -> Rendering {
+        let n = (camera.width * camera.height) as usize;
+        let mut r = Rendering {
+            width: camera.width,
+            height: camera.height,
+            rgb: vec![0.0; n * 3],
+            depth: vec![f32::INFINITY; n],
+            object: vec![None; n],
+            mask: vec![false; n],
+        };
+        for v in 0..camera.height {
+            for u in 0..camera.width {
+                let i = (v * camera.width + u) as usize;
+                let (o, d) = camera.pixel_ray(u, v);
+                if let Some(h) = self.trace(o, d) {
+                    r.rgb[i * 3..i * 3 + 3].copy_from_slice(&h.rgb.to_array());
+                    r.depth[i] = h.t;
+                    r.object[i] = Some(h.object);
+                    r.mask[i] = self.objects[h.object].foreground;
+                }
+            }
+        }
+        r
+    }
+}
+
+/// Ray–shape intersection in local coordinates: nearest `t > ε` and the outward normal there.
+fn intersect(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f32, Vec3)> {
+    const EPS: f32 = 1e-5;
+    match *shape {
+        Shape::Sphere { center, radius } => {
+            let oc = o - center;
+            let b = oc.dot(d);
+            let c = oc.dot(oc) - radius * radius;
+            let disc = b * b - d.dot(d) * c;
+            if disc < 0.0 {
+                return None;
+            }
+            let s = disc.sqrt();
+            let a = d.dot(d);
+            let t = [(-b - s) / a, (-b + s) / a]
+                .into_iter()
+                .find(|&t| t > EPS)?;
+            Some((t, (o + d * t - center).normalize()))
+        }
+        Shape::Box { min, max } => {
+            let (mut t0, mut t1) = (f32::NEG_INFINITY, f32::INFINITY);
+            let (mut n0, mut n1) = (Vec3::ZERO, Vec3::ZERO);
+            for k in 0..3 {
+                if d[k].abs() < 1e-12 {
+                    if o[k] < min[k] || o[k] > max[k] {
+                        return None;
+                    }
+                    continue;
+                }
+                let (a, b) = ((min[k] - o[k]) / d[k], (max[k] - o[k]) / d[k]);
+                let (near, far, sn) = if a < b { (a, b, -1.0) } else { (b, a, 1.0) };
+                if near > t0 {
+                    t0 = near;
+                    n0 = Vec3::ZERO;
+                    n0[k] = sn;
+                }
+                if far < t1 {
+                    t1 = far;
+                    n1 = Vec3::ZERO;
+                    n1[k] = -sn;
+                }
+            }
+            if t0 > t1 {
+                return None;
+            }
+            if t0 > EPS {
+                Some((t0, n0))
+            } else if t1 > EPS {
+                Some((t1, n1))
+            } else {
+                None
+            }
+        }
+        Shape::Plane { point, normal } => {
+            let denom = d.dot(normal);
+            if denom.abs() < 1e-9 {
+                return None;
+            }
+            let t = (point - o).dot(normal) / denom;
+            (t > EPS).then(|| (t, normal.normalize()))
+        }
+    }
+}

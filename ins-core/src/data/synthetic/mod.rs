@@ -1,0 +1,13 @@
+//! Small analytic scenes (spheres, boxes, planes, procedural checker textures), ray-cast with
+//! exact depth and masks, and written out in the Blender, LLFF and DTU/IDR formats.
+//!
+//! They prove the geometry: a test writes a scene, reads it back through the real loader, and
+//! checks that the loaded ray of a pixel meets the surface point that was rendered there, at the
+//! depth that was rendered. One sample per pixel, at its centre, so the colour and depth of a
+//! pixel belong to exactly that pixel's ray.
+
+mod analytic;
+mod writers;
+
+pub use analytic::*;
+pub use writers::*;
