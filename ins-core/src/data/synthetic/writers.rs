@@ -47,6 +47,20 @@ pub struct SynthView {
     pub depth_bounds: (f32, f32),
 }
 
+impl SynthView {
+    /// The view of `camera`, with the depth bounds of its rendering.
+    fn new(camera: Camera, split: Split, image_path: PathBuf, render: Rendering) -> Self {
+        let depth_bounds = z_depth_bounds(&camera, &render);
+        SynthView {
+            camera,
+            split,
+            image_path,
+            render,
+            depth_bounds,
+        }
+    }
+}
+
 /// Everything a test needs to check a written scene: the analytic scene in the written world
 /// frame and each view's camera and rendering, in the order the loader will list them.
 #[derive(Clone, Debug)]
@@ -144,14 +158,7 @@ pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, Data
                 "rotation": 0.0,
                 "transform_matrix": [c[0], c[1], c[2], [0.0, 0.0, 0.0, 1.0]],
             }));
-            let depth_bounds = z_depth_bounds(&camera, &render);
-            views.push(SynthView {
-                camera,
-                split,
-                image_path,
-                render,
-                depth_bounds,
-            });
+            views.push(SynthView::new(camera, split, image_path, render));
         }
         let path = dir.join(format!("transforms_{split}.json"));
         let text =
@@ -207,20 +214,15 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
         let image_path = img_dir.join(format!("image{i:03}.png"));
         let rgb: Vec<u8> = render.rgb.iter().map(|&v| to_u8(v)).collect();
         write_png(&image_path, w, h, 3, &rgb)?;
-        let depth_bounds = z_depth_bounds(&camera, &render);
+        let view = SynthView::new(camera, Split::Train, image_path, render);
+        let depth_bounds = view.depth_bounds;
         // LLFF columns: [down, right, back, t, hwf] = [−up, right, back, t, hwf].
         for r in 0..3 {
             let hwf = [h as f32, w as f32, focal][r];
             rows.extend([-c2w[r][1], c2w[r][0], c2w[r][2], c2w[r][3], hwf].map(f64::from));
         }
         rows.extend([depth_bounds.0 as f64, depth_bounds.1 as f64]);
-        views.push(SynthView {
-            camera,
-            split: Split::Train,
-            image_path,
-            render,
-            depth_bounds,
-        });
+        views.push(view);
     }
     write_npy(&dir.join("poses_bounds.npy"), &[n, 17], &rows)?;
     Ok(SynthScene {
@@ -330,14 +332,7 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
         ];
         arrays.push((format!("world_mat_{i}"), vec![4, 4], world));
         arrays.push((format!("scale_mat_{i}"), vec![4, 4], scale_mat));
-        let depth_bounds = z_depth_bounds(&camera, &render);
-        views.push(SynthView {
-            camera,
-            split: Split::Train,
-            image_path,
-            render,
-            depth_bounds,
-        });
+        views.push(SynthView::new(camera, Split::Train, image_path, render));
     }
     write_npz(&dir.join("cameras.npz"), &arrays)?;
     Ok(SynthScene {
