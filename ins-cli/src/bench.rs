@@ -3,7 +3,7 @@
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use burn::optim::{AdamConfig, GradientsParams};
+use burn::optim::GradientsParams;
 use burn::prelude::*;
 use burn::tensor::Distribution;
 use clap::Args;
@@ -164,7 +164,7 @@ fn bench_siren(device: &Device, steps: usize, precision: Precision) -> Result<Ve
         device,
     );
     let code = Tensor::<2>::from_floats([[1.0, 0.0]], device);
-    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut adam = ins_core::train::adam();
     timed(steps, || {
         let m = model.take().expect("model");
         let rgb = m.forward(coords.clone(), code.clone());
@@ -229,7 +229,7 @@ fn bench_nerf_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let mut model = Some(NerfModel::new(&mlp_arch(), BOX, device));
     let rays = bench_rays(1024, 1);
     let target = Tensor::<2>::random([1024, 3], Distribution::Uniform(0.0, 1.0), device);
-    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut adam = ins_core::train::adam();
     let sampling = Sampling::CoarseFine {
         coarse: 64,
         fine: 64,
@@ -280,7 +280,7 @@ fn bench_nerf_stylize(device: &Device, steps: usize, precision: Precision) -> Re
     let mut model = Some(m0);
     let rays = bench_rays(1024, 2);
     let code = Tensor::<2>::from_floats([[1.0, 0.0]], device);
-    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut adam = ins_core::train::adam();
     let sampling = Sampling::CoarseFine {
         coarse: 64,
         fine: 64,
@@ -351,7 +351,7 @@ fn bench_nerf_grid(device: &Device, steps: usize) -> Result<Vec<f64>> {
     });
     let rays = bench_rays(GRID_RAYS, 3);
     let target = Tensor::<2>::random([GRID_RAYS, 3], Distribution::Uniform(0.0, 1.0), device);
-    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut adam = ins_core::train::adam();
     let mut seed = 0;
     timed(steps, || {
         let m = model.take().expect("model");

@@ -3,7 +3,7 @@
 //! rays, the differentiable surface point, colour, mask and eikonal losses, backward, Adam.
 
 use anyhow::{Context, Result};
-use burn::optim::{AdamConfig, GradientsParams};
+use burn::optim::GradientsParams;
 use burn::prelude::*;
 use ins_core::data::synthetic::{SynthOptions, write_dtu};
 use ins_core::train::{StepContext, Task};
@@ -35,7 +35,7 @@ pub fn bench_idr_pretrain(device: &Device, steps: usize) -> Result<Vec<f64>> {
     let mut task = pretrain_task(&cfg, scene, Vec::new(), dir.path().join("val"), device)?;
     let phase = pretrain_phase(&cfg);
     let mut model = Some(IdrModel::new(&cfg.arch(), device));
-    let mut adam = AdamConfig::new().with_epsilon(1e-8).init();
+    let mut adam = ins_core::train::adam();
     let mut step = 0;
     timed(steps, || {
         let m = model.take().context("model")?;

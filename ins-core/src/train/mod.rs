@@ -3,6 +3,7 @@
 
 pub mod checkpoint;
 pub mod error;
+pub mod fused_adam;
 pub mod groups;
 pub mod guard;
 pub mod metrics;
@@ -19,4 +20,4 @@ pub use groups::{GroupSetting, GroupSpec, Optimizable, ParamGroups};
 pub use phase::{Objective, Phase};
 pub use schedule::LrSchedule;
 pub use task::{LossTerms, StepContext, Task};
-pub use trainer::{TrainOptions, TrainOutcome, Trainer, step_seed};
+pub use trainer::{TrainOptions, TrainOutcome, Trainer, adam, step_seed};
