@@ -119,11 +119,7 @@ pub trait FusedAdamOps: Backend {
         grad: FloatTensor<Self>,
         m: FloatTensor<Self>,
         v: FloatTensor<Self>,
-        lr: f32,
-        beta_1: f32,
-        beta_2: f32,
-        scale: f32,
-        epsilon: f32,
+        step: kernel::Step,
     ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>);
 }
 
@@ -153,19 +149,8 @@ impl FusedAdamOps for Flex {
         grad: FlexTensor,
         m: FlexTensor,
         v: FlexTensor,
-        lr: f32,
-        beta_1: f32,
-        beta_2: f32,
-        scale: f32,
-        epsilon: f32,
+        s: kernel::Step,
     ) -> (FlexTensor, FlexTensor, FlexTensor) {
-        let s = kernel::Step {
-            lr,
-            beta_1,
-            beta_2,
-            scale,
-            epsilon,
-        };
         let grad = grad.to_contiguous();
         let g = grad.as_slice::<f32>().expect("contiguous f32");
         let (mut param, mut m, mut v) = (writable(param), writable(m), writable(v));
@@ -218,11 +203,7 @@ impl Optimizer for FusedAdam {
                 grad.into_dispatch(),
                 m.into_dispatch(),
                 v.into_dispatch(),
-                s.lr,
-                s.beta_1,
-                s.beta_2,
-                s.scale,
-                s.epsilon,
+                s,
             );
             (
                 Tensor::from_dispatch(p),
