@@ -68,7 +68,9 @@ pub struct IdrRunConfig {
     pub color_width: usize,
     /// Finest resolution of an appearance hash grid in the colour network (0: none): texture
     /// finer than the SDF's grid, which has to stay coarse for smooth normals, can hold. Its
-    /// 16.8 M parameters make a step about half again as long.
+    /// 16.8 M parameters make a step about a seventh longer (94 against 82 ms on scan37 at
+    /// 400×300); on the full schedule it ended at 20.19 dB held-out with IoU 0.979, against the
+    /// defaults' 19.98 and 0.990 (see the README).
     #[arg(long, default_value_t = 0)]
     pub color_grid: u32,
     /// Weight of the mask loss (IDR: 100).
