@@ -10,8 +10,10 @@ use std::mem::MaybeUninit;
 
 use rayon::prelude::*;
 
+use burn::backend::DispatchDevice;
 use burn::backend::TensorData;
 use burn::backend::flex::FlexTensor;
+use burn::prelude::*;
 
 /// A matrix operand: its first element and its (row, column) strides in elements.
 pub(crate) type Strided = (*const f32, [isize; 2]);
@@ -91,4 +93,9 @@ pub(crate) fn filled(n: usize, fill: impl Fn(usize, &mut [MaybeUninit<f32>]) + S
     // SAFETY: `fill` writes every element of every chunk (its contract).
     unsafe { out.set_len(n) };
     out
+}
+
+/// Whether `x` lives on Flex (with or without autodiff): where the hand-written ops run.
+pub(crate) fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
+    matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_))
 }

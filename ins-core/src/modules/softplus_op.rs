@@ -16,12 +16,12 @@ use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
-    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, TensorData,
-    TensorMetadata, backend_extension,
+    Autodiff, AutodiffBackend, Backend, DType, Dispatch, Flex, TensorData, TensorMetadata,
+    backend_extension,
 };
 use burn::prelude::*;
 
-use crate::flex_kernels::filled;
+use crate::flex_kernels::{filled, on_flex};
 
 /// The kernels, on `a = βx`, through `e = e^{−|a|}` (never overflows):
 /// `softplus = max(a, 0) + log1p(e)`, `σ(a) = 1/(1+e)` for `a ≥ 0` and `e/(1+e)` below.
@@ -273,10 +273,6 @@ impl<B: Backend + SoftplusOps, C: CheckpointStrategy> SoftplusOps for Autodiff<B
             map,
         ))
     }
-}
-
-fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
-    matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_))
 }
 
 fn mapped<const D: usize>(x: Tensor<D>, beta: f64, map: Map) -> Tensor<D> {

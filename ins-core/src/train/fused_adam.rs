@@ -13,11 +13,13 @@
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
-    Backend, DType, Dispatch, DispatchDevice, Flex, TensorData, TensorMetadata, backend_extension,
+    Backend, DType, Dispatch, Flex, TensorData, TensorMetadata, backend_extension,
 };
 use burn::optim::{AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer};
 use burn::prelude::*;
 use rayon::prelude::*;
+
+use crate::flex_kernels::on_flex;
 
 /// Adam's constants (Kingma & Ba), no weight decay, no AMSGrad.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -172,10 +174,6 @@ impl FusedAdamOps for Flex {
         }
         (param, m, v)
     }
-}
-
-fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
-    matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_))
 }
 
 impl Optimizer for FusedAdam {
