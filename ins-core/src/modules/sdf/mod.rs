@@ -16,15 +16,17 @@
 //! an approximate sphere with Softplus β = 100: a replica of it gives f(0) ≈ −0.08 for
 //! r = 0.5, not −0.5; the explicit sphere makes the starting surface exact.
 
+mod dual;
+mod grid;
+mod mlp;
+
 use burn::module::Param;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
-use super::dense_op::dense;
-use super::encoding::FourierEncoding;
-use super::hash_grid::{HashGrid, HashGridConfig};
-use super::softplus_op::{softplus, softplus_slope};
+pub use grid::{SdfGrid, SdfGridConfig};
+pub use mlp::{SdfMlp, SdfMlpConfig};
 
 /// Softplus sharpness (IDR).
 const BETA: f64 = 100.0;
@@ -62,115 +64,6 @@ fn zero_inputs(l: &mut Linear, rows: std::ops::Range<usize>) {
     l.weight = Param::from_tensor((w * mask.expand([d_in, d_out])).detach());
 }
 
-/// Value and forward-mode tangents of a layer stack: `h [N, D]`, `t [3N, D]` (the three
-/// tangents stacked along rows, tangent k in rows `kN..(k+1)N`).
-struct Dual {
-    h: Tensor<2>,
-    t: Tensor<2>,
-}
-
-impl Dual {
-    fn linear(self, l: &Linear) -> Self {
-        let w = l.weight.val();
-        Self {
-            h: dense(l, self.h),
-            t: self.t.matmul(w),
-        }
-    }
-
-    fn softplus(self) -> Self {
-        let [n, d] = self.h.dims();
-        let slope = softplus_slope(self.h.clone(), BETA);
-        let slope = slope
-            .unsqueeze_dim::<3>(0)
-            .expand([3, n, d])
-            .reshape([3 * n, d]);
-        Self {
-            h: softplus(self.h, BETA),
-            t: self.t * slope,
-        }
-    }
-
-    fn cat(self, other: Dual, scale: f32) -> Self {
-        Self {
-            h: Tensor::cat(vec![self.h, other.h], 1).mul_scalar(scale),
-            t: Tensor::cat(vec![self.t, other.t], 1).mul_scalar(scale),
-        }
-    }
-
-    /// Splits the output into (sdf [N], features [N, F], ∇sdf [N, 3]).
-    fn split(self) -> (Tensor<1>, Tensor<2>, Tensor<2>) {
-        let [n, d] = self.h.dims();
-        let sdf = self.h.clone().slice([0..n, 0..1]).reshape([n]);
-        let features = self.h.slice([0..n, 1..d]);
-        let grad = self.t.slice([0..3 * n, 0..1]).reshape([3, n]).transpose();
-        (sdf, features, grad)
-    }
-}
-
-/// The positional encoding and its derivatives with respect to each coordinate, as a [`Dual`].
-fn encode_dual(x: Tensor<2>, n_freqs: usize) -> Dual {
-    let [n, _] = x.dims();
-    let device = x.device();
-    let enc = FourierEncoding::new(n_freqs);
-    let d = enc.d_out(3);
-    // d/dx of [x, sin(2^j x), cos(2^j x)] elementwise: [1, 2^j cos(2^j x), −2^j sin(2^j x)].
-    let mut parts = vec![Tensor::<2>::ones([n, 3], &device)];
-    for j in 0..n_freqs {
-        let f = (1u64 << j) as f32;
-        let s = x.clone().mul_scalar(f);
-        parts.push(s.clone().cos().mul_scalar(f));
-        parts.push(s.sin().mul_scalar(-f));
-    }
-    let deriv = Tensor::cat(parts, 1);
-    // Column c of the encoding belongs to coordinate c mod 3.
-    let masks: Vec<f32> = (0..3)
-        .flat_map(|k| (0..d).map(move |c| if c % 3 == k { 1.0 } else { 0.0 }))
-        .collect();
-    let masks = Tensor::<1>::from_floats(masks.as_slice(), &device).reshape([3, 1, d]);
-    let t = (deriv.unsqueeze_dim::<3>(0).expand([3, n, d]) * masks).reshape([3 * n, d]);
-    Dual {
-        h: enc.encode(x),
-        t,
-    }
-}
-
-/// Configuration of an [`SdfMlp`].
-#[derive(Config, Debug)]
-pub struct SdfMlpConfig {
-    /// Octaves of the positional encoding (IDR: 6).
-    #[config(default = 6)]
-    pub n_freqs: usize,
-    /// Width (IDR: 512).
-    #[config(default = 512)]
-    pub d_hidden: usize,
-    /// Hidden layers (IDR: 8).
-    #[config(default = 8)]
-    pub depth: usize,
-    /// Layer that sees the encoded input again (IDR: 4).
-    #[config(default = 4)]
-    pub skip_at: usize,
-    /// Width of the feature vector (IDR: 256).
-    #[config(default = 256)]
-    pub d_features: usize,
-    /// Radius of the initial sphere.
-    #[config(default = 0.5)]
-    pub radius: f64,
-}
-
-/// IDR's SDF MLP.
-#[derive(Module, Debug)]
-pub struct SdfMlp {
-    /// Hidden layers (Softplus β = 100), then the output layer.
-    pub layers: Vec<Linear>,
-    /// Layer index that sees the encoded input again.
-    pub skip_at: usize,
-    /// Octaves of the positional encoding.
-    pub n_freqs: usize,
-    /// Radius of the sphere the field starts as.
-    pub radius: f32,
-}
-
 /// The output layer: the distance column starts at ≈ 0 (weights N(0, 1e-4), bias 0), the
 /// feature columns with the usual initialisation.
 fn distance_head(d_in: usize, d_out: usize, device: &Device) -> Linear {
@@ -202,211 +95,6 @@ fn add_sphere(
     let sdf = sdf + norm.clone().sub_scalar(radius);
     let grad = grad.map(|g| g + x / norm.clamp_min(1e-6).reshape([n, 1]));
     (sdf, grad)
-}
-
-impl SdfMlpConfig {
-    /// Builds the network (IDR's layer initialisation, distance output near zero): the field
-    /// starts as the signed distance to the sphere of radius `radius`.
-    pub fn init(&self, device: &Device) -> SdfMlp {
-        let d_in = FourierEncoding::new(self.n_freqs).d_out(3);
-        let h = self.d_hidden;
-        let mut layers = Vec::with_capacity(self.depth + 1);
-        for l in 0..=self.depth {
-            let input = if l == 0 { d_in } else { h };
-            // The layer before the skip narrows so that [h, x] is `h` wide again.
-            let output = if l == self.depth {
-                1 + self.d_features
-            } else if l + 1 == self.skip_at {
-                h - d_in
-            } else {
-                h
-            };
-            let layer = if l == self.depth {
-                distance_head(input, output, device)
-            } else {
-                let mut lin = linear_normal(
-                    input,
-                    output,
-                    0.0,
-                    (2.0f64).sqrt() / (output as f64).sqrt(),
-                    0.0,
-                    device,
-                );
-                if l == 0 {
-                    // Only the raw coordinates drive the initial field.
-                    zero_inputs(&mut lin, 3..d_in);
-                } else if l == self.skip_at {
-                    // The re-injected encoding (after the hidden part) starts silent too.
-                    zero_inputs(&mut lin, (input - d_in + 3)..input);
-                }
-                lin
-            };
-            layers.push(layer);
-        }
-        SdfMlp {
-            layers,
-            skip_at: self.skip_at,
-            n_freqs: self.n_freqs,
-            radius: self.radius as f32,
-        }
-    }
-}
-
-impl SdfMlp {
-    /// `x [N, 3]` → signed distance `[N]` and features `[N, F]`.
-    pub fn forward(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
-        let input = FourierEncoding::new(self.n_freqs).encode(x.clone());
-        let mut h = input.clone();
-        let last = self.layers.len() - 1;
-        for (l, layer) in self.layers.iter().enumerate() {
-            if l == self.skip_at {
-                h = Tensor::cat(vec![h, input.clone()], 1)
-                    .mul_scalar(std::f32::consts::FRAC_1_SQRT_2);
-            }
-            h = dense(layer, h);
-            if l < last {
-                h = softplus(h, BETA);
-            }
-        }
-        let [n, d] = h.dims();
-        let (sdf, _) = add_sphere(
-            x,
-            self.radius,
-            h.clone().slice([0..n, 0..1]).reshape([n]),
-            None,
-        );
-        (sdf, h.slice([0..n, 1..d]))
-    }
-
-    /// Value, features and the exact gradient `∇f [N, 3]` (forward mode), all differentiable
-    /// in the parameters and in `x`.
-    pub fn forward_with_gradient(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>, Tensor<2>) {
-        let input = encode_dual(x.clone(), self.n_freqs);
-        let mut d = Dual {
-            h: input.h.clone(),
-            t: input.t.clone(),
-        };
-        let last = self.layers.len() - 1;
-        for (l, layer) in self.layers.iter().enumerate() {
-            if l == self.skip_at {
-                let again = Dual {
-                    h: input.h.clone(),
-                    t: input.t.clone(),
-                };
-                d = d.cat(again, std::f32::consts::FRAC_1_SQRT_2);
-            }
-            d = d.linear(layer);
-            if l < last {
-                d = d.softplus();
-            }
-        }
-        let (sdf, features, grad) = d.split();
-        let (sdf, grad) = add_sphere(x, self.radius, sdf, Some(grad));
-        (sdf, features, grad.expect("gradient"))
-    }
-}
-
-/// Configuration of an [`SdfGrid`].
-#[derive(Config, Debug)]
-pub struct SdfGridConfig {
-    /// The hash grid.
-    pub grid: HashGridConfig,
-    /// Hidden width.
-    #[config(default = 64)]
-    pub d_hidden: usize,
-    /// Width of the feature vector.
-    #[config(default = 15)]
-    pub d_features: usize,
-    /// Radius of the initial sphere.
-    #[config(default = 0.5)]
-    pub radius: f64,
-}
-
-/// Hash grid + MLP over `[x, enc(x)]` → (signed distance, features), over the box `[-b, b]³`.
-#[derive(Module, Debug)]
-pub struct SdfGrid {
-    /// The encoding.
-    pub grid: HashGrid,
-    /// Hidden layer over `[x, enc(x)]`.
-    pub hidden: Linear,
-    /// Output layer: distance then features.
-    pub out: Linear,
-    /// Half side of the box the grid covers.
-    pub bound: f32,
-    /// Radius of the sphere the field starts as.
-    pub radius: f32,
-}
-
-impl SdfGridConfig {
-    /// Builds the network over `[-bound, bound]³`, starting as the sphere of radius `radius`.
-    pub fn init(&self, bound: f32, device: &Device) -> SdfGrid {
-        let grid = self.grid.init(device);
-        let d_in = 3 + grid.d_out();
-        let h = self.d_hidden;
-        let hidden = linear_normal(
-            d_in,
-            h,
-            0.0,
-            (2.0f64).sqrt() / (h as f64).sqrt(),
-            0.0,
-            device,
-        );
-        let out = distance_head(h, 1 + self.d_features, device);
-        SdfGrid {
-            grid,
-            hidden,
-            out,
-            bound,
-            radius: self.radius as f32,
-        }
-    }
-}
-
-impl SdfGrid {
-    fn unit(&self, x: Tensor<2>) -> Tensor<2> {
-        x.div_scalar(2.0 * self.bound).add_scalar(0.5)
-    }
-
-    /// `x [N, 3]` → signed distance `[N]` and features `[N, F]`.
-    pub fn forward(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
-        let enc = self.grid.forward(self.unit(x.clone()));
-        let h = softplus(
-            dense(&self.hidden, Tensor::cat(vec![x.clone(), enc], 1)),
-            BETA,
-        );
-        let out = dense(&self.out, h);
-        let [n, d] = out.dims();
-        let (sdf, _) = add_sphere(
-            x,
-            self.radius,
-            out.clone().slice([0..n, 0..1]).reshape([n]),
-            None,
-        );
-        (sdf, out.slice([0..n, 1..d]))
-    }
-
-    /// Value, features and the exact gradient `∇f [N, 3]` (forward mode through the grid's
-    /// Jacobian and the MLP), differentiable in the parameters.
-    pub fn forward_with_gradient(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>, Tensor<2>) {
-        let [n, _] = x.dims();
-        let device = x.device();
-        let u = self.unit(x.clone());
-        let enc = self.grid.forward(u.clone());
-        let jac = self.grid.jacobian(u).div_scalar(2.0 * self.bound); // [N, L·F, 3]
-        let e = enc.dims()[1];
-        // Tangent k: [e_k, ∂enc/∂x_k].
-        let eye = Tensor::<2>::eye(3, &device); // [3, 3]
-        let t_x = eye.unsqueeze_dim::<3>(1).expand([3, n, 3]);
-        let t_enc = jac.permute([2, 0, 1]); // [3, N, L·F]
-        let t = Tensor::cat(vec![t_x, t_enc], 2).reshape([3 * n, 3 + e]);
-        let d = Dual {
-            h: Tensor::cat(vec![x.clone(), enc], 1),
-            t,
-        };
-        let (sdf, features, grad) = d.linear(&self.hidden).softplus().linear(&self.out).split();
-        let (sdf, grad) = add_sphere(x, self.radius, sdf, Some(grad));
-        (sdf, features, grad.expect("gradient"))
-    }
 }
 
 /// An SDF network of either kind.
@@ -452,6 +140,7 @@ impl SdfNet {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::modules::hash_grid::HashGridConfig;
 
     fn points(device: &Device) -> Tensor<2> {
         Tensor::<2>::from_floats(
