@@ -116,13 +116,12 @@ fn has_checkpoint(run: &Path) -> bool {
 fn wait_for_checkpoint_write(run: &Path, limit: Duration) -> bool {
     let start = Instant::now();
     while start.elapsed() < limit {
-        if let Ok(entries) = std::fs::read_dir(run.join("checkpoints")) {
-            if entries
+        if let Ok(entries) = std::fs::read_dir(run.join("checkpoints"))
+            && entries
                 .filter_map(|e| e.ok())
                 .any(|e| e.file_name().to_string_lossy().starts_with(".step-"))
-            {
-                return true;
-            }
+        {
+            return true;
         }
         std::thread::sleep(Duration::from_millis(5));
     }
@@ -135,7 +134,7 @@ fn last_logged_step(run: &Path) -> Option<u64> {
     log.lines()
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
         .filter_map(|v| v["step"].as_u64())
-        .last()
+        .next_back()
 }
 
 /// Waits until the run has logged `step` (true) or the process ended or time ran out (false).

@@ -80,6 +80,9 @@ fn conv_gemm(
         }
     };
     let job = |cols: &mut Vec<f32>, vnni: &mut Vec<u16>, b: usize, c: usize| {
+        // Captures the whole `Shared` (Sync), not its raw pointer field (closures capture
+        // fields on their own since edition 2021).
+        #[allow(clippy::redundant_locals)]
         let dst = dst;
         let p0 = c * chunk;
         let n = chunk.min(pixels - p0);

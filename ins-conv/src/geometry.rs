@@ -22,6 +22,7 @@ pub struct ConvGeometry {
 
 impl ConvGeometry {
     /// Output height and width; `None` when the kernel does not fit the padded input.
+    #[allow(clippy::needless_range_loop)] // `i` indexes five arrays alike
     pub fn output(&self) -> Option<[usize; 2]> {
         let mut out = [0; 2];
         for i in 0..2 {

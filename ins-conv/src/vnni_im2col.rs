@@ -44,7 +44,7 @@ pub unsafe fn im2col_vnni(
     assert!(
         src.values.len() >= channels * h * w
             && src.gate.is_none_or(|g| g.len() == src.values.len())
-            && n_pad % TILE == 0
+            && n_pad.is_multiple_of(TILE)
             && n <= n_pad
     );
     out.resize(kp * n_pad, 0);

@@ -4,6 +4,9 @@
 //! renderers) → [`modules`] (SIM / CIM / AM) → [`loss`] → [`train`] (the one trainer).
 //! [`backend`] picks the compute device at run time; [`imaging`] turns tensors into pictures.
 
+// Burn's `slice` takes one range per dimension, so `[a..b]` on a 1-D tensor is the idiom.
+#![allow(clippy::single_range_in_vec_init)]
+
 pub mod backend;
 pub mod contain;
 pub mod data;

@@ -9,6 +9,9 @@
 //!   (SIREN, or a user's own content module).
 //! - [`stylize2d`]: classic 2D style transfer of one image, and the per-view baseline.
 
+// Burn's `slice` takes one range per dimension, so `[a..b]` on a 1-D tensor is the idiom.
+#![allow(clippy::single_range_in_vec_init)]
+
 pub mod config;
 pub mod demo;
 pub mod idr;

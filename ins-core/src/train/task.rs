@@ -28,8 +28,12 @@ pub struct LossTerms {
     pub metrics: Vec<(String, f64)>,
     /// Logged numbers computed from a term's value once the trainer has read it (e.g. PSNR
     /// from MSE), so the task does not read the term a second time.
-    pub derived: Vec<(&'static str, &'static str, fn(f64) -> f64)>,
+    pub derived: Vec<Derived>,
 }
+
+/// A logged number derived from a term: (its name, the term's name, the function of the
+/// term's value).
+pub type Derived = (&'static str, &'static str, fn(f64) -> f64);
 
 impl LossTerms {
     /// Adds a term.

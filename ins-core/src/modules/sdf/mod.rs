@@ -97,7 +97,8 @@ fn add_sphere(
     (sdf, grad)
 }
 
-/// An SDF network of either kind.
+/// An SDF network of either kind (one per model, so the variants' sizes do not matter).
+#[allow(clippy::large_enum_variant)]
 #[derive(Module, Debug)]
 pub enum SdfNet {
     /// IDR's MLP.
