@@ -4,7 +4,7 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use super::dual::Dual;
-use super::{BETA, add_sphere, distance_head, linear_normal};
+use super::{BETA, add_sphere, distance_and_features, distance_head, linear_normal};
 use crate::modules::dense_op::dense;
 use crate::modules::hash_grid::{HashGrid, HashGridConfig};
 use crate::modules::softplus_op::softplus;
@@ -78,14 +78,7 @@ impl SdfGrid {
             BETA,
         );
         let out = dense(&self.out, h);
-        let [n, d] = out.dims();
-        let (sdf, _) = add_sphere(
-            x,
-            self.radius,
-            out.clone().slice([0..n, 0..1]).reshape([n]),
-            None,
-        );
-        (sdf, out.slice([0..n, 1..d]))
+        distance_and_features(x, self.radius, out)
     }
 
     /// Value, features and the exact gradient `∇f [N, 3]` (forward mode through the grid's

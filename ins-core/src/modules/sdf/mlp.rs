@@ -4,7 +4,7 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use super::dual::{Dual, encode_dual};
-use super::{BETA, add_sphere, distance_head, linear_normal, zero_inputs};
+use super::{BETA, add_sphere, distance_and_features, distance_head, linear_normal, zero_inputs};
 use crate::modules::dense_op::dense;
 use crate::modules::encoding::FourierEncoding;
 use crate::modules::softplus_op::softplus;
@@ -109,14 +109,7 @@ impl SdfMlp {
                 h = softplus(h, BETA);
             }
         }
-        let [n, d] = h.dims();
-        let (sdf, _) = add_sphere(
-            x,
-            self.radius,
-            h.clone().slice([0..n, 0..1]).reshape([n]),
-            None,
-        );
-        (sdf, h.slice([0..n, 1..d]))
+        distance_and_features(x, self.radius, h)
     }
 
     /// Value, features and the exact gradient `∇f [N, 3]` (forward mode), all differentiable

@@ -97,6 +97,19 @@ fn add_sphere(
     (sdf, grad)
 }
 
+/// Splits a network's output `[N, 1 + F]` into the signed distance, the sphere added, and the
+/// features.
+fn distance_and_features(x: Tensor<2>, radius: f32, out: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
+    let [n, d] = out.dims();
+    let (sdf, _) = add_sphere(
+        x,
+        radius,
+        out.clone().slice([0..n, 0..1]).reshape([n]),
+        None,
+    );
+    (sdf, out.slice([0..n, 1..d]))
+}
+
 /// An SDF network of either kind (one per model, so the variants' sizes do not matter).
 #[allow(clippy::large_enum_variant)]
 #[derive(Module, Debug)]
