@@ -2,7 +2,7 @@
 # The test suite: installs what is missing, then runs every test of the workspace.
 # It builds into the same target folder as the README's main command (./target, release
 # profile), so on a fresh machine Burn compiles once for both. The first run builds Burn
-# (about 26 minutes on 2 cores) and fetches VGG-16 (65 MB) once.
+# (20 to 50 minutes on 2 cores, by CPU) and fetches VGG-16 (65 MB) once.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
