@@ -4,7 +4,9 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use super::dual::Dual;
-use super::{BETA, add_sphere, distance_and_features, distance_head, linear_normal};
+use super::{
+    BETA, distance_and_features, distance_features_and_gradient, distance_head, linear_normal,
+};
 use crate::modules::dense_op::dense;
 use crate::modules::hash_grid::{HashGrid, HashGridConfig};
 use crate::modules::softplus_op::softplus;
@@ -99,8 +101,7 @@ impl SdfGrid {
             h: Tensor::cat(vec![x.clone(), enc], 1),
             t,
         };
-        let (sdf, features, grad) = d.linear(&self.hidden).softplus().linear(&self.out).split();
-        let (sdf, grad) = add_sphere(x, self.radius, sdf, Some(grad));
-        (sdf, features, grad.expect("gradient"))
+        let out = d.linear(&self.hidden).softplus().linear(&self.out);
+        distance_features_and_gradient(x, self.radius, out)
     }
 }

@@ -4,7 +4,10 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use super::dual::{Dual, encode_dual};
-use super::{BETA, add_sphere, distance_and_features, distance_head, linear_normal, zero_inputs};
+use super::{
+    BETA, distance_and_features, distance_features_and_gradient, distance_head, linear_normal,
+    zero_inputs,
+};
 use crate::modules::dense_op::dense;
 use crate::modules::encoding::FourierEncoding;
 use crate::modules::softplus_op::softplus;
@@ -134,8 +137,6 @@ impl SdfMlp {
                 d = d.softplus();
             }
         }
-        let (sdf, features, grad) = d.split();
-        let (sdf, grad) = add_sphere(x, self.radius, sdf, Some(grad));
-        (sdf, features, grad.expect("gradient"))
+        distance_features_and_gradient(x, self.radius, d)
     }
 }

@@ -20,6 +20,8 @@ mod dual;
 mod grid;
 mod mlp;
 
+use dual::Dual;
+
 use burn::module::Param;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
@@ -83,31 +85,33 @@ fn distance_head(d_in: usize, d_out: usize, device: &Device) -> Linear {
     l
 }
 
-/// Adds the sphere `|x| − r` to the network's distance (and `x / |x|` to its gradient).
-fn add_sphere(
-    x: Tensor<2>,
-    radius: f32,
-    sdf: Tensor<1>,
-    grad: Option<Tensor<2>>,
-) -> (Tensor<1>, Option<Tensor<2>>) {
+/// `|x|` per row of `x [N, 3]`.
+fn norm(x: Tensor<2>) -> Tensor<1> {
     let [n, _] = x.dims();
-    let norm = x.clone().square().sum_dim(1).sqrt().reshape([n]);
-    let sdf = sdf + norm.clone().sub_scalar(radius);
-    let grad = grad.map(|g| g + x / norm.clamp_min(1e-6).reshape([n, 1]));
-    (sdf, grad)
+    x.square().sum_dim(1).sqrt().reshape([n])
 }
 
-/// Splits a network's output `[N, 1 + F]` into the signed distance, the sphere added, and the
-/// features.
+/// Splits a network's output `[N, 1 + F]` into the signed distance, the sphere `|x| − r`
+/// added, and the features.
 fn distance_and_features(x: Tensor<2>, radius: f32, out: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
     let [n, d] = out.dims();
-    let (sdf, _) = add_sphere(
-        x,
-        radius,
-        out.clone().slice([0..n, 0..1]).reshape([n]),
-        None,
-    );
+    let sdf = out.clone().slice([0..n, 0..1]).reshape([n]) + norm(x).sub_scalar(radius);
     (sdf, out.slice([0..n, 1..d]))
+}
+
+/// [`distance_and_features`] of a forward-mode output, with the gradient: the network's plus
+/// the sphere's `x / |x|`.
+fn distance_features_and_gradient(
+    x: Tensor<2>,
+    radius: f32,
+    out: Dual,
+) -> (Tensor<1>, Tensor<2>, Tensor<2>) {
+    let [n, _] = x.dims();
+    let (sdf, features, grad) = out.split();
+    let norm = norm(x.clone());
+    let sdf = sdf + norm.clone().sub_scalar(radius);
+    let grad = grad + x / norm.clamp_min(1e-6).reshape([n, 1]);
+    (sdf, features, grad)
 }
 
 /// An SDF network of either kind (one per model, so the variants' sizes do not matter).
