@@ -6,11 +6,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
-use ins_core::data::check::check_scene;
-use ins_core::data::contact_sheet::contact_sheet;
-use ins_core::data::synthetic::{self, SynthOptions};
-use ins_core::data::{LoadOptions, Scene, SceneFormat, Split};
-use ins_core::render::geometry::Bounds;
+use ins_scene::data::check::check_scene;
+use ins_scene::data::contact_sheet::contact_sheet;
+use ins_scene::data::synthetic::{self, SynthOptions};
+use ins_scene::data::{LoadOptions, Scene, SceneFormat, Split};
+use ins_scene::geometry::Bounds;
 
 /// Scene data commands.
 #[derive(Subcommand, Debug)]

@@ -5,18 +5,17 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use clap::{ArgMatches, Args};
-use ins_core::backend::BackendChoice;
 use ins_core::imaging::RgbImage;
-use ins_core::render::camera::Camera;
-use ins_core::render::paths::turntable_for_scene;
 use ins_core::render::sphere_tracing::TraceOptions;
 use ins_models::config::merge_with_file;
-use ins_models::idr::config::IdrKind;
 use ins_models::idr::eval::{evaluate_views, render_camera};
 use ins_models::idr::mesh::extract_mesh;
-use ins_models::idr::{IdrRun, IdrRunConfig};
+use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
+use ins_models::run::RunKind;
+use ins_scene::camera::Camera;
+use ins_scene::paths::turntable_for_scene;
 
-use crate::siren_cmd::{RunArgs, parse_size};
+use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
 use crate::vgg_cmd::VggArgs;
 use crate::video::{FrameOutput, write_frames};
 
@@ -30,42 +29,31 @@ pub struct TrainIdr {
     #[command(flatten)]
     run: RunArgs,
     #[command(flatten)]
+    device: DeviceArgs,
+    #[command(flatten)]
     vgg: VggArgs,
 }
 
 pub fn train(a: TrainIdr, matches: &ArgMatches) -> Result<()> {
     let cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
-    let kind = cfg.kind()?;
-    let backend = a.run.backend.resolve();
-    let device = backend.device();
-    let opts = a.run.train_options(&a.out, cfg.seed, cfg.checkpoint_every);
-    let outcome = match kind {
-        IdrKind::Pretrain => {
-            eprintln!(
-                "reconstructing a surface ({} SDF) with {backend} into {}",
-                cfg.sdf,
-                a.out.display()
-            );
-            ins_models::idr::pretrain(&cfg, &device, opts)?
-        }
-        IdrKind::Stylize => {
-            let vgg = a.vgg.load(&device)?;
-            eprintln!(
-                "stylizing a surface with {} style(s) on {backend} into {}",
-                cfg.styles.len(),
-                a.out.display()
-            );
-            ins_models::idr::stylize(&cfg, vgg, &device, opts)?
-        }
+    let what = match cfg.kind()? {
+        RunKind::Pretrain => format!("reconstructing a surface ({} SDF)", cfg.sdf),
+        RunKind::Stylize => format!(
+            "stylizing a surface with {} style(s)",
+            cfg.style.styles.len()
+        ),
     };
-    crate::siren_cmd::print_summary(&a.out, &outcome);
-    eprintln!(
-        "done in {:.1} s: see {}/val/; render with `ins-cli render idr --run {}`, mesh with `ins-cli export mesh --run {}`",
-        outcome.seconds,
-        a.out.display(),
-        a.out.display(),
-        a.out.display()
+    let next = format!(
+        "see {o}/val/; render with `ins-cli render idr --run {o}`, mesh with `ins-cli export mesh --run {o}`",
+        o = a.out.display()
     );
+    let cmd = TrainCommand {
+        out: &a.out,
+        run: &a.run,
+        device: &a.device,
+        vgg: &a.vgg,
+    };
+    cmd.train::<Idr>(&cfg, cfg.schedule.checkpoint_every, &what, &next)?;
     Ok(())
 }
 
@@ -95,13 +83,12 @@ pub struct RenderIdr {
     /// Output: a .png (one view), a .gif or .mp4 (a path), or a folder (frames).
     #[arg(long)]
     out: PathBuf,
-    /// Backend.
-    #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    #[command(flatten)]
+    device: DeviceArgs,
 }
 
 pub fn render(a: RenderIdr) -> Result<()> {
-    let device = a.backend.device();
+    let device = a.device.device();
     let run = IdrRun::load(&a.run, &device)?;
     let code = run.code(a.mix.as_deref(), &device)?;
     let size = a.size.as_deref().map(parse_size).transpose()?;
@@ -110,7 +97,7 @@ pub fn render(a: RenderIdr) -> Result<()> {
     let shoot = |camera: &Camera| -> Result<RgbImage> {
         let r = render_camera(
             &model,
-            &run.scene,
+            &run.scene(),
             &crate::view_size::resized(camera, size),
             code.clone(),
             &trace,
@@ -123,10 +110,10 @@ pub fn render(a: RenderIdr) -> Result<()> {
         })
     };
     if let Some(view) = a.view {
-        let v = run.scene.views.get(view).with_context(|| {
+        let v = run.scene().views.get(view).with_context(|| {
             format!(
                 "--view {view}: the scene has {} views",
-                run.scene.views.len()
+                run.scene().views.len()
             )
         })?;
         shoot(&v.camera)?.save(&a.out)?;
@@ -137,7 +124,8 @@ pub fn render(a: RenderIdr) -> Result<()> {
         "turntable" => {}
         other => bail!("unknown --path {other:?} (surfaces render on a turntable)"),
     }
-    let cameras = turntable_for_scene(&run.scene, a.frames).context("the scene has no cameras")?;
+    let cameras =
+        turntable_for_scene(&run.scene(), a.frames).context("the scene has no cameras")?;
     let output = FrameOutput::for_path(&a.out)?;
     let mut frames = Vec::new();
     for (i, c) in cameras.iter().enumerate() {
@@ -159,15 +147,14 @@ pub struct EvalIdr {
     /// Run folder written by `train idr`.
     #[arg(long)]
     run: PathBuf,
-    /// Backend.
-    #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    #[command(flatten)]
+    device: DeviceArgs,
 }
 
 pub fn eval(a: EvalIdr) -> Result<()> {
-    let device = a.backend.device();
+    let device = a.device.device();
     let run = IdrRun::load(&a.run, &device)?;
-    let views = run.scene.split(ins_core::data::Split::Val).to_vec();
+    let views = run.scene().split(ins_scene::data::Split::Val).to_vec();
     if views.is_empty() {
         bail!(
             "{}: the run holds no views out; train with --holdout K to evaluate",
@@ -177,7 +164,7 @@ pub fn eval(a: EvalIdr) -> Result<()> {
     let code = run.code(None, &device)?;
     let evals = evaluate_views(
         &run.model.valid(),
-        &run.scene,
+        &run.scene(),
         &views,
         code,
         run.masked(),
@@ -217,9 +204,8 @@ pub struct ExportMesh {
     /// Output .ply.
     #[arg(long)]
     out: PathBuf,
-    /// Backend.
-    #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    #[command(flatten)]
+    device: DeviceArgs,
 }
 
 pub fn export_mesh(a: ExportMesh) -> Result<()> {
@@ -233,7 +219,7 @@ pub fn export_mesh(a: ExportMesh) -> Result<()> {
         bail!("{}: meshes are written as .ply", a.out.display());
     }
     ins_models::idr::mesh::check_resolution(a.resolution)?;
-    let device = a.backend.device();
+    let device = a.device.device();
     let run = IdrRun::load(&a.run, &device)?;
     let code = run.code(a.mix.as_deref(), &device)?;
     let (mesh, colors) = extract_mesh(&run.model.valid(), a.resolution, code, &device)?;

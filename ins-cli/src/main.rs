@@ -2,8 +2,7 @@
 //! representations.
 
 mod bench;
-mod bench_idr;
-mod bench_vgg_layers;
+mod common;
 mod consistency_cmd;
 mod data_cmd;
 mod idr_cmd;
@@ -65,10 +64,10 @@ enum Command {
     },
     /// Classic 2D style transfer (Gatys) of an image, or of each frame of a folder on its own.
     Stylize2d(stylize2d_cmd::Stylize2d),
-    /// A static HTML report of a stylized NeRF run: views, animations, depth, loss curves,
+    /// A static HTML report of a stylized NeRF or IDR run: views, animations, depth, loss curves,
     /// consistency and style tables (runs `eval consistency` first if needed).
     Report(report_cmd::Report),
-    /// Benchmark workloads of BENCHMARKS.md (one JSON line each).
+    /// Benchmark workloads of docs/benchmarks.md (one JSON line each).
     Bench(bench::BenchArgs),
 }
 
@@ -98,8 +97,9 @@ enum EvalVariant {
     Nerf(nerf_cmd::EvalNerf),
     /// Silhouette IoU and PSNR inside the mask on the held-out views of an IDR run.
     Idr(idr_cmd::EvalIdr),
-    /// View consistency of a stylized NeRF along a path (frames warped by the pretrained
-    /// depth), against the per-view 2D baseline; Gram and content distances per view.
+    /// View consistency of a stylized NeRF or IDR run along a path (frames warped by the pretrained
+    /// depth), against the per-view 2D baseline; Gram and content distances per view; the
+    /// painting's texture on the object against Gatys run to convergence.
     Consistency(consistency_cmd::EvalConsistency),
 }
 

@@ -5,17 +5,16 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use clap::{ArgMatches, Args};
-use ins_core::backend::BackendChoice;
-use ins_core::data::Split;
 use ins_core::imaging::RgbImage;
-use ins_core::render::camera::Camera;
-use ins_core::render::paths::{spiral_for_scene, turntable_for_scene};
 use ins_models::config::merge_with_file;
-use ins_models::nerf::config::RunKind;
 use ins_models::nerf::eval::{ViewRender, depth_agreement, evaluate_views, render_camera};
-use ins_models::nerf::{NerfRun, NerfRunConfig};
+use ins_models::nerf::{Nerf, NerfRun, NerfRunConfig};
+use ins_models::run::RunKind;
+use ins_scene::camera::Camera;
+use ins_scene::data::Split;
+use ins_scene::paths::{spiral_for_scene, turntable_for_scene};
 
-use crate::siren_cmd::{RunArgs, parse_size};
+use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
 use crate::vgg_cmd::VggArgs;
 use crate::video::{FrameOutput, write_frames};
 
@@ -29,48 +28,43 @@ pub struct TrainNerf {
     #[command(flatten)]
     run: RunArgs,
     #[command(flatten)]
+    device: DeviceArgs,
+    #[command(flatten)]
     vgg: VggArgs,
 }
 
 pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
     let cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
-    let kind = cfg.kind()?;
-    let backend = a.run.backend.resolve();
-    let device = backend.device();
-    let opts = a.run.train_options(&a.out, cfg.seed, cfg.checkpoint_every);
-    let outcome = match kind {
-        RunKind::Pretrain => {
-            eprintln!(
-                "pretraining a NeRF ({} content module) on {} with {backend} into {}",
-                cfg.cim,
-                cfg.scene
-                    .as_ref()
-                    .map_or(String::new(), |p| p.display().to_string()),
-                a.out.display()
-            );
-            ins_models::nerf::pretrain(&cfg, &device, opts)?
-        }
-        RunKind::Stylize => {
-            let vgg = a.vgg.load(&device)?;
-            eprintln!(
-                "stylizing {} with {} style{} on {backend} into {}",
-                cfg.from
-                    .as_ref()
-                    .map_or(String::new(), |p| p.display().to_string()),
-                cfg.styles.len(),
-                if cfg.styles.len() == 1 { "" } else { "s" },
-                a.out.display()
-            );
-            ins_models::nerf::stylize(&cfg, vgg, &device, opts)?
-        }
+    let what = match cfg.kind()? {
+        RunKind::Pretrain => format!(
+            "pretraining a NeRF ({} content module) on {}",
+            cfg.cim,
+            cfg.source
+                .scene
+                .as_ref()
+                .map_or(String::new(), |p| p.display().to_string())
+        ),
+        RunKind::Stylize => format!(
+            "stylizing {} with {} style{}",
+            cfg.source
+                .from
+                .as_ref()
+                .map_or(String::new(), |p| p.display().to_string()),
+            cfg.style.styles.len(),
+            if cfg.style.styles.len() == 1 { "" } else { "s" }
+        ),
     };
-    crate::siren_cmd::print_summary(&a.out, &outcome);
-    eprintln!(
-        "done in {:.1} s: see {}/val/ and loss_curve.png; render with `ins-cli render nerf --run {}`",
-        outcome.seconds,
-        a.out.display(),
-        a.out.display()
+    let next = format!(
+        "see {o}/val/ and loss_curve.png; render with `ins-cli render nerf --run {o}`",
+        o = a.out.display()
     );
+    let cmd = TrainCommand {
+        out: &a.out,
+        run: &a.run,
+        device: &a.device,
+        vgg: &a.vgg,
+    };
+    cmd.train::<Nerf>(&cfg, cfg.schedule.checkpoint_every, &what, &next)?;
     Ok(())
 }
 
@@ -111,9 +105,8 @@ pub struct RenderNerf {
     /// Output: a .png (one view), a .gif or .mp4 (a path), or a folder (frames).
     #[arg(long)]
     out: PathBuf,
-    /// Backend.
-    #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    #[command(flatten)]
+    device: DeviceArgs,
 }
 
 fn picture(r: &ViewRender, depth: bool) -> RgbImage {
@@ -121,12 +114,12 @@ fn picture(r: &ViewRender, depth: bool) -> RgbImage {
 }
 
 pub fn render(a: RenderNerf) -> Result<()> {
-    let device = a.backend.device();
+    let device = a.device.device();
     let run = NerfRun::load(&a.run, &device)?;
     let code = run.code(a.mix.as_deref(), &device)?;
     let size = a.size.as_deref().map(parse_size).transpose()?;
     let model = run.model.valid();
-    let scene = &run.scene;
+    let scene = &run.scene();
     let shoot = |camera: &Camera| -> Result<RgbImage> {
         let cam = crate::view_size::resized(camera, size);
         let r = render_camera(
@@ -184,8 +177,8 @@ pub fn render(a: RenderNerf) -> Result<()> {
 /// The path of a scene when none is asked for: the LLFF spiral for forward-facing scenes, a
 /// turntable for the others.
 pub fn default_path(run: &NerfRun) -> &'static str {
-    match run.scene.format {
-        ins_core::data::SceneFormat::Llff => "spiral",
+    match run.scene().format {
+        ins_scene::data::SceneFormat::Llff => "spiral",
         _ => "turntable",
     }
 }
@@ -193,7 +186,7 @@ pub fn default_path(run: &NerfRun) -> &'static str {
 /// The cameras of a `--path` (spiral or turntable; default: spiral for forward-facing scenes,
 /// turntable for the others) of `frames` frames.
 pub fn path_cameras(run: &NerfRun, kind: Option<&str>, frames: usize) -> Result<Vec<Camera>> {
-    let scene = &run.scene;
+    let scene = &run.scene();
     match kind.unwrap_or(default_path(run)) {
         "spiral" => spiral_for_scene(scene, frames),
         "turntable" => turntable_for_scene(scene, frames),
@@ -210,18 +203,17 @@ pub struct EvalNerf {
     /// Split to evaluate (default: val, or test where the scene has no val split).
     #[arg(long)]
     split: Option<Split>,
-    /// Backend.
-    #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    #[command(flatten)]
+    device: DeviceArgs,
 }
 
 pub fn eval(a: EvalNerf) -> Result<()> {
-    let device = a.backend.device();
+    let device = a.device.device();
     let run = NerfRun::load(&a.run, &device)?;
-    let scene = &run.scene;
+    let scene = &run.scene();
     let views: Vec<usize> = match a.split {
         Some(s) => scene.split(s).to_vec(),
-        None => ins_models::nerf::run::heldout_views(scene),
+        None => ins_models::run::scene::heldout_views(scene),
     };
     if views.is_empty() {
         bail!(
@@ -241,7 +233,7 @@ pub fn eval(a: EvalNerf) -> Result<()> {
         run.background(),
         &device,
     )?;
-    let teacher = match &run.config.from {
+    let teacher = match &run.config.source.from {
         Some(from) if stylized => Some(NerfRun::load(from, &device)?),
         _ => None,
     };
@@ -257,7 +249,7 @@ pub fn eval(a: EvalNerf) -> Result<()> {
             let cam = &scene.views[e.view].camera;
             let tr = render_camera(
                 &t.model.valid(),
-                &t.scene,
+                &t.scene(),
                 cam,
                 t.sampling(),
                 None,

@@ -1,4 +1,4 @@
-//! `ins-cli report`: one static HTML page for a stylized NeRF run (no server needed): the
+//! `ins-cli report`: one static HTML page for a stylized NeRF or IDR run (no server needed): the
 //! painting, pretrained and stylized views side by side, the path animations, depth before and
 //! after stylization, the loss curves and the consistency / style / content tables.
 
@@ -14,7 +14,7 @@ use crate::consistency_cmd::EvalConsistency;
 
 #[derive(Args, Debug)]
 pub struct Report {
-    /// A stylized NeRF run. Its `consistency/` evaluation is used when present, and run first
+    /// A stylized NeRF or IDR run. Its `consistency/` evaluation is used when present, and run first
     /// (with the options below) when not.
     #[arg(long)]
     run: PathBuf,
@@ -43,9 +43,14 @@ struct EvalOptions {
     /// Optimisation steps per frame of the 2D baseline.
     #[arg(long, default_value_t = crate::consistency_cmd::BASELINE_STEPS)]
     baseline_steps: usize,
-    /// Backend.
-    #[arg(long, default_value = "auto")]
-    backend: ins_core::backend::BackendChoice,
+    /// Views at which the texture on the object is measured.
+    #[arg(long, default_value_t = crate::consistency_cmd::REFERENCE_VIEWS)]
+    reference_views: usize,
+    /// Steps of the converged 2D reference per view.
+    #[arg(long, default_value_t = crate::consistency_cmd::REFERENCE_STEPS)]
+    reference_steps: usize,
+    #[command(flatten)]
+    device: crate::common::DeviceArgs,
     /// No progress bars.
     #[arg(long)]
     quiet: bool,
@@ -61,6 +66,7 @@ const COPIED: &[(&str, &str)] = &[
     ("baseline2d.gif", "baseline2d.gif"),
     ("depth_pretrained.png", "depth_pretrained.png"),
     ("depth_stylized.png", "depth_stylized.png"),
+    ("strength_consistency.png", "strength_consistency.png"),
 ];
 
 fn escape(s: &str) -> String {
@@ -123,10 +129,7 @@ pub fn run(a: Report) -> Result<()> {
     let summary_path = eval_dir.join("summary.json");
     if a.refresh || !summary_path.is_file() {
         if !a.run.join("config.json").is_file() {
-            bail!(
-                "{} is not a NeRF run folder (no config.json)",
-                a.run.display()
-            );
+            bail!("{} is not a run folder (no config.json)", a.run.display());
         }
         eprintln!(
             "{} has no consistency evaluation yet: running it",
@@ -142,8 +145,10 @@ pub fn run(a: Report) -> Result<()> {
             baseline2d: e.baseline2d,
             baseline_steps: e.baseline_steps,
             baseline_lr: crate::consistency_cmd::BASELINE_LR,
+            reference_views: e.reference_views,
+            reference_steps: e.reference_steps,
             out: None,
-            backend: e.backend,
+            device: e.device.clone(),
             quiet: e.quiet,
             vgg: e.vgg.clone(),
         })?;
@@ -198,6 +203,38 @@ pub fn run(a: Report) -> Result<()> {
     Ok(())
 }
 
+/// The painting's texture on the object: nearest-neighbour feature distances per layer at the
+/// reference views, the transfer ratios, and the strength/consistency picture.
+fn texture_section(h: &mut String, s: &Value, picture: bool) {
+    let Some(sets) = s["texture"]["sets"].as_array() else {
+        return;
+    };
+    h.push_str(
+        "<h2>The painting's texture on the object</h2><p>At a few views of the path, for each          position on the object, 1 − the best cosine similarity of its VGG feature to any          position of the painting (lower: nearer the painting), and the share of the way from          the pretrained frames to Gatys' method run to convergence on the same views that each          set went (the transfer ratio; 1: as far as the converged 2D result). relu1_2 and          relu2_2 mostly read colour (the palette), relu3_3 and relu4_3 strokes (the texture).         </p><table><tr><th>frames</th><th>relu1_2</th><th>relu2_2</th><th>relu3_3</th>         <th>relu4_3</th><th>palette transfer</th><th>texture transfer</th></tr>",
+    );
+    for set in sets {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(set["set"].as_str().unwrap_or("?")),
+            fmt(&set["nn_relu1_2"]),
+            fmt(&set["nn_relu2_2"]),
+            fmt(&set["nn_relu3_3"]),
+            fmt(&set["nn_relu4_3"]),
+            fmt(&set["palette_transfer"]),
+            fmt(&set["texture_transfer"])
+        );
+    }
+    h.push_str("</table>");
+    if picture {
+        figure(
+            h,
+            "strength_consistency.png",
+            "texture transfer against warp RMSE: strength and consistency at once",
+        );
+    }
+}
+
 fn figure(out: &mut String, src: &str, caption: &str) {
     let _ = write!(
         out,
@@ -241,9 +278,9 @@ fn page(run: &Path, pretrained: &Path, s: &Value, shown: &[&str], curves: &[&str
         figure(&mut h, "painting.png", "the painting");
     }
     let rows = if has("baseline2d.gif") {
-        "pretrained (top), stylized NeRF (middle), per-view 2D baseline (bottom)"
+        "pretrained (top), stylized (middle), per-view 2D baseline (bottom)"
     } else {
-        "pretrained (top), stylized NeRF (bottom)"
+        "pretrained (top), stylized (bottom)"
     };
     figure(
         &mut h,
@@ -253,7 +290,7 @@ fn page(run: &Path, pretrained: &Path, s: &Value, shown: &[&str], curves: &[&str
     h.push_str("<h2>Path animations</h2>");
     for (f, c) in [
         ("pretrained.gif", "pretrained"),
-        ("stylized.gif", "stylized NeRF"),
+        ("stylized.gif", "stylized"),
         ("baseline2d.gif", "per-view 2D baseline"),
     ] {
         if has(f) {
@@ -299,13 +336,14 @@ fn page(run: &Path, pretrained: &Path, s: &Value, shown: &[&str], curves: &[&str
     if s.get("baseline_over_stylized_k1").is_some() {
         let _ = write!(
             h,
-            "<p>The 2D baseline's RMSE over the stylized NeRF's: <b>{}×</b> at k=1, <b>{}×</b> \
+            "<p>The 2D baseline's RMSE over the stylized run's: <b>{}×</b> at k=1, <b>{}×</b> \
              at k=7 ({} steps per frame).</p>",
             fmt(&s["baseline_over_stylized_k1"]),
             fmt(&s["baseline_over_stylized_k7"]),
             s["baseline2d_steps"]
         );
     }
+    texture_section(&mut h, s, has("strength_consistency.png"));
     let (pre, sty) = (last_with(pretrained, "val_psnr"), last_with(run, "style"));
     if pre.is_some() || sty.is_some() {
         h.push_str(

@@ -3,14 +3,14 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::common::DeviceArgs;
 use anyhow::{Result, bail};
 use clap::Args;
-use ins_core::backend::BackendChoice;
-use ins_core::data::images::list_images;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::LossWeights;
 use ins_core::train::TrainOptions;
-use ins_models::stylize2d::{StyleGrams, Stylize2dSettings, stylize, stylize_with};
+use ins_models::stylize2d::{Stylize2dSettings, painting_loss, stylize, stylize_with};
+use ins_scene::data::images::list_images;
 use vgg_import::Vgg;
 
 use crate::vgg_cmd::VggArgs;
@@ -50,9 +50,8 @@ pub struct Stylize2d {
     /// Content loss weight (default: per VGG preprocessing).
     #[arg(long)]
     content_weight: Option<f64>,
-    /// Backend: auto, flex, ndarray or wgpu.
-    #[arg(long, default_value = "auto")]
-    backend: BackendChoice,
+    #[command(flatten)]
+    device: DeviceArgs,
     /// Continue a single-image run from its newest checkpoint.
     #[arg(long)]
     resume: bool,
@@ -70,6 +69,7 @@ impl Stylize2d {
             lr: self.lr,
             weights: LossWeights::or_defaults(
                 vgg.preprocess,
+                ins_core::loss::StyleLoss::Gram,
                 self.content_weight,
                 self.style_weight,
             ),
@@ -109,7 +109,7 @@ pub fn run(a: Stylize2d) -> Result<()> {
         bail!("--steps must be at least 1");
     }
     let style = RgbImage::load(&a.style)?;
-    let backend = a.backend.resolve();
+    let backend = a.device.backend.resolve();
     let device = backend.device();
     let vgg = a.vgg.load(&device)?;
     let settings = a.settings(&vgg);
@@ -134,7 +134,7 @@ pub fn run(a: Stylize2d) -> Result<()> {
             let opts = options(&a.out, a.resume, 100);
             let (result, outcome) = stylize(&img, &style, vgg, &settings, opts, &device)?;
             result.save(&a.out)?;
-            crate::siren_cmd::print_summary(&a.out, &outcome);
+            crate::common::print_summary(&a.out, &outcome);
         }
         (None, Some(dir)) => {
             let frames = list_images(dir)?;
@@ -192,7 +192,7 @@ pub fn stylize_frames(
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out_dir).map_err(|e| anyhow::anyhow!("{}: {e}", out_dir.display()))?;
     let mut written = Vec::with_capacity(frames.len());
-    let grams = StyleGrams::new(run.vgg, run.style, run.settings.style_size, run.device);
+    let perceptual = painting_loss(run.vgg, run.style, run.settings.style_size, run.device);
     for (i, frame) in frames.iter().enumerate() {
         let name = frame.file_stem().unwrap_or_default().to_string_lossy();
         let out = out_dir.join(format!("{name}.png"));
@@ -213,14 +213,7 @@ pub fn stylize_frames(
         let mut opts = TrainOptions::new(run_dir(&out));
         opts.checkpoint_every = 0;
         opts.quiet = run.quiet;
-        let (result, _) = stylize_with(
-            &img,
-            &grams,
-            run.vgg.clone(),
-            run.settings,
-            opts,
-            run.device,
-        )?;
+        let (result, _) = stylize_with(&img, &perceptual, run.settings, opts)?;
         result.save(&out)?;
         if run.keep_runs {
             let _ = std::fs::remove_dir_all(run_dir(&out).join("checkpoints"));

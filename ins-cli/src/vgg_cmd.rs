@@ -6,7 +6,6 @@ use anyhow::{Context, Result};
 use burn::prelude::Device;
 use clap::{Args, Subcommand};
 use ins_conv::Precision;
-use ins_core::backend::BackendChoice;
 use ins_core::imaging::RgbImage;
 use vgg_import::source::{cache_dir, fetch_default, resolve_onnx};
 use vgg_import::{Preprocess, Vgg, VggSource, load_vgg};
@@ -90,9 +89,8 @@ pub enum VggCommand {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
-        /// Backend.
-        #[arg(long, default_value = "auto")]
-        backend: BackendChoice,
+        #[command(flatten)]
+        device: crate::common::DeviceArgs,
     },
 }
 
@@ -130,9 +128,9 @@ pub fn run(cmd: VggCommand) -> Result<()> {
             image,
             vgg,
             out,
-            backend,
+            device,
         } => {
-            let device = backend.device();
+            let device = device.device();
             let model = vgg.load(&device)?;
             let img = RgbImage::load(&image)?;
             let f = model.features(img.to_tensor(&device));

@@ -1,6 +1,6 @@
 //! The `--size WxH` of the render commands.
 
-use ins_core::render::camera::Camera;
+use ins_scene::camera::Camera;
 
 /// `camera` rendering at `size` when one is given (each axis scaled on its own), else as it is.
 pub fn resized(camera: &Camera, size: Option<(usize, usize)>) -> Camera {

@@ -245,3 +245,119 @@ fn bench_idr_pretrain_reports_a_step_time_and_its_rays() {
         "{line}"
     );
 }
+
+#[test]
+fn a_stylized_surface_is_evaluated_along_a_turntable_with_its_texture_on_the_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("dtu");
+    ok(cli(&[
+        "data",
+        "synth",
+        "--format",
+        "dtu",
+        "--out",
+        s(&scene),
+        "--size",
+        "32",
+        "--views",
+        "8",
+    ]));
+    let run = dir.path().join("run");
+    ok(cli(&[
+        "train",
+        "idr",
+        "--scene",
+        s(&scene),
+        "--steps",
+        "30",
+        "--rays",
+        "256",
+        "--eval-every",
+        "0",
+        "--out",
+        s(&run),
+        "--quiet",
+        "--backend",
+        "flex",
+    ]));
+    let painting = dir.path().join("stripes.png");
+    image::RgbImage::from_fn(48, 48, |x, y| {
+        if ((x + y) / 4) % 2 == 0 {
+            image::Rgb([230, 30, 30])
+        } else {
+            image::Rgb([30, 50, 230])
+        }
+    })
+    .save(&painting)
+    .unwrap();
+    let styled = dir.path().join("styled");
+    ok(cli(&[
+        "train",
+        "idr",
+        "--from",
+        s(&run),
+        "--style",
+        s(&painting),
+        "--steps",
+        "6",
+        "--patch",
+        "16",
+        "--stride",
+        "1",
+        "--style-size",
+        "48",
+        "--out",
+        s(&styled),
+        "--quiet",
+        "--backend",
+        "flex",
+    ]));
+    let out = dir.path().join("eval");
+    let o = ok(cli(&[
+        "eval",
+        "consistency",
+        "--run",
+        s(&styled),
+        "--frames",
+        "9",
+        "--reference-views",
+        "2",
+        "--reference-steps",
+        "4",
+        "--out",
+        s(&out),
+        "--quiet",
+        "--backend",
+        "flex",
+    ]));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["path"], "turntable");
+    // The surface is frozen: the stylized run sees the object where the pretrained one does.
+    assert_eq!(
+        summary["opacity_agreement"].as_f64(),
+        Some(1.0),
+        "{summary}"
+    );
+    let sets = summary["texture"]["sets"].as_array().unwrap();
+    let names: Vec<&str> = sets.iter().map(|s| s["set"].as_str().unwrap()).collect();
+    assert_eq!(names, ["pretrained", "stylized", "reference2d"]);
+    for set in sets {
+        for l in ["relu1_2", "relu2_2", "relu3_3", "relu4_3"] {
+            let d = set[format!("nn_{l}")].as_f64().unwrap();
+            assert!((0.0..=2.0).contains(&d), "{set}");
+        }
+    }
+    // By definition the pretrained frames are at 0 and the reference at 1 where defined.
+    let pre = &sets[0];
+    let reference = &sets[2];
+    for l in ["relu1_2", "relu2_2", "relu3_3", "relu4_3"] {
+        let key = format!("transfer_{l}");
+        if let (Some(p), Some(r)) = (pre[&key].as_f64(), reference[&key].as_f64()) {
+            assert_eq!((p, r), (0.0, 1.0), "{key}");
+        }
+    }
+    assert!(out.join("strength_consistency.png").is_file());
+    assert!(out.join("reference2d").join("frame_0002.png").is_file());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("rmse_k1"));
+}

@@ -17,10 +17,10 @@ pub struct RgbImage {
 }
 
 impl RgbImage {
-    /// Reads a PNG or JPEG through [`crate::data::plain_image::load_rgb`] (alpha composited on
+    /// Reads a PNG or JPEG through [`ins_scene::data::plain_image::load_rgb`] (alpha composited on
     /// white); errors name the file.
     pub fn load(path: &Path) -> Result<Self> {
-        let img = crate::data::plain_image::load_rgb(path, None)?;
+        let img = ins_scene::data::plain_image::load_rgb(path, None)?;
         Ok(Self {
             width: img.width as usize,
             height: img.height as usize,

@@ -9,7 +9,6 @@
 
 pub mod backend;
 pub mod contain;
-pub mod data;
 pub mod eval;
 mod flex_kernels;
 pub mod imaging;

@@ -8,14 +8,15 @@ use anyhow::Result;
 use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::Distribution;
+use ins_core::loss::{PerceptualLoss, StyleLoss};
 use ins_core::modules::cim::ContentModule;
 use ins_core::modules::ins::Ins;
 use ins_core::modules::mlp::{ReluMlp, ReluMlpConfig};
 use ins_core::modules::sim::SimConfig;
-use ins_core::render::patches::PatchSpec;
 use ins_core::train::{Phase, TrainOptions, Trainer};
 use ins_models::demo::{demo_content, demo_style};
-use ins_models::image_task::{ImageObjective, ImageTask, ImageTaskFor, render_image};
+use ins_models::image_task::{ImageObjective, ImageTask, render_image};
+use ins_scene::patches::PatchSpec;
 
 /// `x ↦ MLP([sin(2πBx), cos(2πBx)])` with a fixed random B.
 #[derive(Module, Debug)]
@@ -65,18 +66,18 @@ fn main() -> Result<()> {
     )?;
     let content = demo_content(96);
     let style = demo_style(128);
-    let weights = ins_core::loss::LossWeights::default_for(vgg.preprocess);
+    let weights =
+        ins_core::loss::LossWeights::default_for(vgg.preprocess, ins_core::loss::StyleLoss::Gram);
     let model = Ins::new(
         GaussianFourierCim::new(64, 6.0, &ad),
         &SimConfig::new(1),
         true,
         &ad,
     );
-    let mut task = ImageTask::new(
+    let perceptual = PerceptualLoss::new(vgg, &[style], 128, StyleLoss::Gram, &ad);
+    let mut task = ImageTask::<GaussianFourierCim>::new(
         content.clone(),
-        &[style],
-        128,
-        vgg,
+        perceptual,
         96 * 96,
         PatchSpec::new(96, 1),
         &ad,
@@ -93,10 +94,7 @@ fn main() -> Result<()> {
     ];
     let mut opts = TrainOptions::new(&out);
     opts.checkpoint_every = 0;
-    let outcome = Trainer::new(phases, opts).run(
-        &mut ImageTaskFor::<GaussianFourierCim>::new(&mut task),
-        model,
-    )?;
+    let outcome = Trainer::new(phases, opts).run(&mut task, model)?;
     let img = render_image(&outcome.model.valid(), 192, 192, &[1.0], &device)?;
     let path = std::path::Path::new(&out).join("stylized_192.png");
     img.save(&path)?;

@@ -10,18 +10,17 @@ use std::collections::HashMap;
 
 use anyhow::Result;
 use burn::prelude::*;
-use ins_core::data::plain_image::pixel_coordinates;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{StyleTarget, content_loss, mse, psnr, style_loss};
+use ins_core::loss::{PerceptualLoss, mse, patch_images, psnr};
 use ins_core::modules::cim::ContentModule;
 use ins_core::modules::ins::Ins;
-use ins_core::render::patches::PatchSpec;
 use ins_core::train::{LossTerms, StepContext, Task};
+use ins_scene::data::plain_image::pixel_coordinates;
+use ins_scene::patches::PatchSpec;
 use rand::Rng;
 use rand::SeedableRng;
 use rand::rngs::SmallRng;
 use serde::{Deserialize, Serialize};
-use vgg_import::Vgg;
 
 /// What a phase of the image task computes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -31,15 +30,6 @@ pub enum ImageObjective {
     Fit,
     /// VGG style and content losses on strided patches, every style at once.
     Stylize,
-}
-
-/// One-hot codes of `n` styles, `[n, n]`.
-pub fn one_hot_codes(n: usize, device: &Device) -> Tensor<2> {
-    let mut v = vec![0f32; n * n];
-    for i in 0..n {
-        v[i * n + i] = 1.0;
-    }
-    Tensor::from_data(TensorData::new(v, [n, n]), device)
 }
 
 /// Renders `model` at `w`×`h` under style code `code` (length `n_styles`), in chunks.
@@ -78,36 +68,30 @@ pub fn render_image<C: ContentModule>(
     })
 }
 
-/// The image task: content, styles, VGG and batch settings.
-pub struct ImageTask {
+/// The image task of a content module `C`: content, the styles' loss and batch settings.
+pub struct ImageTask<C> {
     device: Device,
     content: RgbImage,
     content_tensor: Tensor<2>,
     coords: Vec<f32>,
-    vgg: Vgg,
-    style_targets: [Tensor<3>; 4],
-    n_styles: usize,
-    codes: Tensor<2>,
+    perceptual: PerceptualLoss,
     fit_batch: usize,
     patch: PatchSpec,
     content_cache: HashMap<(u32, u32), Tensor<4>>,
+    _model: std::marker::PhantomData<C>,
 }
 
-impl ImageTask {
-    /// Prepares the task: content at its training size, style images (Gram targets at
-    /// `style_size` on the longer side), VGG on `device`. The patch shrinks to fit the content;
-    /// a stride too large for it is an error.
+impl<C: ContentModule> ImageTask<C> {
+    /// Prepares the task: content at its training size and the styles' loss, on `device`. The
+    /// patch shrinks to fit the content; a stride too large for it is an error.
     pub fn new(
         content: RgbImage,
-        styles: &[RgbImage],
-        style_size: usize,
-        vgg: Vgg,
+        perceptual: PerceptualLoss,
         fit_batch: usize,
         patch: PatchSpec,
         device: &Device,
     ) -> Result<Self> {
         let patch = patch.fitted(content.width as u32, content.height as u32)?;
-        let style_targets = StyleTarget::stacked_from_images(&vgg, styles, style_size, device);
         let content_tensor = Tensor::<1>::from_data(
             TensorData::new(content.data.clone(), [content.data.len()]),
             device,
@@ -118,13 +102,11 @@ impl ImageTask {
             coords: pixel_coordinates(content.width as u32, content.height as u32).into_flattened(),
             content,
             content_tensor,
-            vgg,
-            style_targets,
-            n_styles: styles.len(),
-            codes: one_hot_codes(styles.len(), device),
+            perceptual,
             fit_batch,
             patch,
             content_cache: HashMap::new(),
+            _model: std::marker::PhantomData,
         })
     }
 
@@ -145,7 +127,7 @@ impl ImageTask {
         (coords, self.content_tensor.clone().select(0, ids))
     }
 
-    fn fit_losses<C: ContentModule>(&self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
+    fn fit_losses(&self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
         let n = self.content.width * self.content.height;
         let mut rng = SmallRng::seed_from_u64(seed);
         let idx: Vec<usize> = if self.fit_batch >= n {
@@ -158,7 +140,7 @@ impl ImageTask {
         let (coords, target) = self.gather(&idx);
         // The fitting phase freezes SIM and AM (see `SirenRunConfig::phases`): the AM stays the
         // identity, so any one code renders the content and every style starts from it.
-        let rgb = model.forward(coords, self.codes.clone().slice([0..1]));
+        let rgb = model.forward(coords, self.perceptual.codes.clone().slice([0..1]));
         let [_, p, _] = rgb.dims();
         let loss = mse(rgb.reshape([p, 3]), target);
         Ok(LossTerms::default()
@@ -166,7 +148,7 @@ impl ImageTask {
             .metric_of("psnr", "mse", psnr))
     }
 
-    fn stylize_losses<C: ContentModule>(&mut self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
+    fn stylize_losses(&mut self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
         let (w, h) = (self.content.width as u32, self.content.height as u32);
         let mut rng = SmallRng::seed_from_u64(seed);
         let (x0, y0) = self.patch.random_origin(w, h, &mut rng)?;
@@ -181,41 +163,26 @@ impl ImageTask {
         let content_target = match self.content_cache.get(&target_key) {
             Some(t) => t.clone(),
             None => {
-                let img = target.reshape([1, k, k, 3]).permute([0, 3, 1, 2]).detach();
-                let t = self.vgg.features(img).relu2_2.detach();
+                let t = self
+                    .perceptual
+                    .content_target(patch_images(target, 1, k).detach());
                 if self.content_cache.len() < 256 {
                     self.content_cache.insert(target_key, t.clone());
                 }
                 t
             }
         };
-        let rgb = model.forward(coords, self.codes.clone());
-        let batch = rgb.reshape([self.n_styles, k, k, 3]).permute([0, 3, 1, 2]);
-        let feats = self.vgg.features(batch);
+        let perceptual = &self.perceptual;
+        let rgb = model.forward(coords, perceptual.codes.clone());
+        let images = patch_images(rgb, perceptual.n_styles(), k);
+        let (style, content) = perceptual.terms(images, &content_target);
         Ok(LossTerms::default()
-            .term("style", style_loss(&feats, &self.style_targets))
-            .term("content", content_loss(&feats, &content_target)))
+            .term("style", style)
+            .term("content", content))
     }
 }
 
-/// An [`ImageTask`] bound to a model type.
-pub struct ImageTaskFor<'a, C> {
-    /// The task.
-    pub task: &'a mut ImageTask,
-    _model: std::marker::PhantomData<C>,
-}
-
-impl<'a, C> ImageTaskFor<'a, C> {
-    /// Binds `task`.
-    pub fn new(task: &'a mut ImageTask) -> Self {
-        Self {
-            task,
-            _model: std::marker::PhantomData,
-        }
-    }
-}
-
-impl<C: ContentModule> Task for ImageTaskFor<'_, C> {
+impl<C: ContentModule> Task for ImageTask<C> {
     type Model = Ins<C>;
     type Objective = ImageObjective;
 
@@ -228,8 +195,8 @@ impl<C: ContentModule> Task for ImageTaskFor<'_, C> {
 
     fn losses(&mut self, model: &Ins<C>, step: &StepContext<ImageObjective>) -> Result<LossTerms> {
         match step.phase.objective {
-            ImageObjective::Fit => self.task.fit_losses(model, step.seed),
-            ImageObjective::Stylize => self.task.stylize_losses(model, step.seed),
+            ImageObjective::Fit => self.fit_losses(model, step.seed),
+            ImageObjective::Stylize => self.stylize_losses(model, step.seed),
         }
     }
 }

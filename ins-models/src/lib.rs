@@ -13,10 +13,12 @@
 #![allow(clippy::single_range_in_vec_init)]
 
 pub mod config;
+pub mod consistency;
 pub mod demo;
 pub mod idr;
 pub mod image_task;
 pub mod nerf;
+pub mod run;
 pub mod siren;
 pub mod style_mix;
 pub mod stylize2d;

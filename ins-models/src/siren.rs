@@ -10,36 +10,32 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::LossWeights;
+use ins_core::loss::{LossWeights, PerceptualLoss};
 use ins_core::modules::cim::{SirenCim, SirenCimConfig};
 use ins_core::modules::ins::Ins;
 use ins_core::modules::sim::SimConfig;
-use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
-use ins_core::train::{Phase, TrainOptions, TrainOutcome, Trainer};
+use ins_core::train::{Phase, RunFolder};
+use ins_scene::patches::PatchSpec;
 use serde::{Deserialize, Serialize};
-use vgg_import::Vgg;
 
-use crate::image_task::{ImageObjective, ImageTask, ImageTaskFor, render_image};
-use ins_core::render::patches::PatchSpec;
+use crate::image_task::{ImageObjective, ImageTask, render_image};
+use crate::run::{Run, RunKind, Start, StyleArgs, Variant};
 
 /// Everything that defines a SIREN+INS run: the `ins-cli train siren` flags and the fields of
 /// the run's `config.json` are this one struct (unknown fields in a `--config` file are refused).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
-#[serde(default, deny_unknown_fields)]
+#[serde(default)]
 pub struct SirenRunConfig {
     /// Content image (default: a built-in generated scene).
     #[arg(long)]
     pub content: Option<PathBuf>,
-    /// Style image; repeat for a conditional multi-style model (default: a built-in generated
-    /// painting). One-hot codes follow this order.
-    #[arg(long = "style")]
-    pub styles: Vec<PathBuf>,
+    /// Paintings and the perceptual loss (default painting: a built-in one).
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub style: StyleArgs,
     /// Longer side of the content at training time, in pixels.
     #[arg(long, default_value_t = 256)]
     pub size: usize,
-    /// Longer side of the style images for their Gram targets.
-    #[arg(long, default_value_t = 128)]
-    pub style_size: usize,
     /// Steps fitting the content. On the demo, 150 steps at 2e-4 end the stylization within
     /// 2 % of the losses of 300 at 1e-4 (content +1.9 %, style −0.7 %) in 2:17 instead of ~6 min.
     #[arg(long, default_value_t = 150)]
@@ -56,12 +52,6 @@ pub struct SirenRunConfig {
     /// Random pixels per fitting step.
     #[arg(long, default_value_t = 8192)]
     pub fit_batch: usize,
-    /// Stylization patch: rays per side.
-    #[arg(long, default_value_t = 128)]
-    pub patch: usize,
-    /// Stylization patch stride in pixels (0: chosen so the patch spans the image).
-    #[arg(long, default_value_t = 0)]
-    pub stride: usize,
     /// Width of the sine layers.
     #[arg(long, default_value_t = 256)]
     pub hidden: usize,
@@ -74,12 +64,6 @@ pub struct SirenRunConfig {
     /// Width of the SIM.
     #[arg(long, default_value_t = 64)]
     pub sim_hidden: usize,
-    /// Style loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    pub style_weight: Option<f64>,
-    /// Content loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    pub content_weight: Option<f64>,
     /// Seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -114,22 +98,8 @@ impl SirenRunConfig {
             .with_depth(self.depth)
             .with_omega0(self.omega0)
             .init(device);
-        let sim = SimConfig::new(self.styles.len().max(1)).with_d_hidden(self.sim_hidden);
+        let sim = SimConfig::new(self.style.styles.len().max(1)).with_d_hidden(self.sim_hidden);
         Ins::new(cim, &sim, true, device)
-    }
-
-    /// The stride that makes a `patch`-wide patch span the image (or the configured one).
-    pub fn effective_stride(&self, w: usize, h: usize) -> usize {
-        if self.stride > 0 {
-            self.stride
-        } else {
-            (w.min(h) / self.patch.max(1)).max(1)
-        }
-    }
-
-    /// Loss weights: the configured ones, else the defaults for the VGG's preprocessing.
-    pub fn weights(&self, preprocess: vgg_import::Preprocess) -> LossWeights {
-        LossWeights::or_defaults(preprocess, self.content_weight, self.style_weight)
     }
 
     /// The two phases. Fitting trains the content path (CIM and RGB head) with SIM and AM
@@ -152,9 +122,20 @@ impl SirenRunConfig {
     }
 }
 
+/// The images of a SIREN run: the content at training size and the paintings.
+pub struct SirenImages {
+    /// The content, its longer side at `--size`.
+    pub content: RgbImage,
+    /// The paintings, in the order of their codes.
+    pub styles: Vec<RgbImage>,
+}
+
+/// Share of the content's shorter side a stylization patch spans: all of it.
+pub const PATCH_SHARE: f32 = 1.0;
+
 /// Loads the content image at training size and the styles, naming files on error.
-pub fn load_images(cfg: &SirenRunConfig) -> Result<(RgbImage, Vec<RgbImage>)> {
-    if cfg.styles.is_empty() {
+pub fn load_images(cfg: &SirenRunConfig) -> Result<SirenImages> {
+    if cfg.style.styles.is_empty() {
         bail!("at least one --style image is needed");
     }
     let content = RgbImage::load(cfg.content_path()?)?.fit_within(cfg.size);
@@ -168,59 +149,141 @@ pub fn load_images(cfg: &SirenRunConfig) -> Result<(RgbImage, Vec<RgbImage>)> {
         );
     }
     let styles = cfg
+        .style
         .styles
         .iter()
         .map(|p| RgbImage::load(p))
         .collect::<Result<Vec<_>>>()?;
-    Ok((content, styles))
+    Ok(SirenImages { content, styles })
 }
 
-/// Trains SIREN+INS into `opts.out_dir`; writes the config, the stylized images and a preview.
-pub fn train(
-    cfg: &SirenRunConfig,
-    vgg: Vgg,
-    device: &Device,
-    opts: TrainOptions,
-) -> Result<TrainOutcome<Ins<SirenCim>>> {
-    let (content, styles) = load_images(cfg)?;
-    let out = opts.out_dir.clone();
-    crate::config::write_run_config(cfg, &out, opts.resume)?;
+/// SIREN + INS: one run fits the image, then stylizes it.
+pub struct Siren;
 
-    let weights = cfg.weights(vgg.preprocess);
-    let patch = PatchSpec::new(
-        cfg.patch as u32,
-        cfg.effective_stride(content.width, content.height) as u32,
-    );
-    let ad = device.clone().autodiff();
-    let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || cfg.build_model(&ad));
-    let vgg = vgg.to_device(&ad);
-    let mut task = ImageTask::new(
-        content.clone(),
-        &styles,
-        cfg.style_size,
-        vgg,
-        cfg.fit_batch,
-        patch,
-        &ad,
-    )?;
-    let trainer = Trainer::new(cfg.phases(weights), opts);
-    let outcome = trainer.run(&mut ImageTaskFor::<SirenCim>::new(&mut task), model)?;
-    if outcome.finished {
-        write_results(cfg, &outcome.model.valid(), &content, &styles, &out, device)?;
+/// A SIREN run folder loaded back.
+pub type SirenRun = Run<Siren>;
+
+impl Variant for Siren {
+    const NAME: &'static str = "SIREN";
+    type Config = SirenRunConfig;
+    type Data = SirenImages;
+    type Model = Ins<SirenCim>;
+    type Objective = ImageObjective;
+    type Task = ImageTask<SirenCim>;
+    type Extra = ();
+
+    /// A SIREN run fits and stylizes in one go: always a pretraining run, with its paintings.
+    fn kind(cfg: &SirenRunConfig) -> Result<RunKind> {
+        if cfg.style.styles.is_empty() {
+            bail!("at least one --style image is needed");
+        }
+        Ok(RunKind::Pretrain)
     }
-    Ok(outcome)
+
+    fn style(cfg: &SirenRunConfig) -> &StyleArgs {
+        &cfg.style
+    }
+
+    fn style_mut(cfg: &mut SirenRunConfig) -> &mut StyleArgs {
+        &mut cfg.style
+    }
+
+    fn base_run(_cfg: &SirenRunConfig) -> Option<&Path> {
+        None
+    }
+
+    fn seed(cfg: &SirenRunConfig) -> u64 {
+        cfg.seed
+    }
+
+    fn load_data(cfg: &mut SirenRunConfig) -> Result<SirenImages> {
+        load_images(cfg)
+    }
+
+    fn resolve(cfg: &mut SirenRunConfig, _kind: RunKind, _data: &SirenImages) {
+        cfg.style.resolve(128, 128);
+    }
+
+    fn inherit(_cfg: &mut SirenRunConfig, _base: &SirenRunConfig, from: &Path) -> Result<()> {
+        bail!(
+            "--from {}: a SIREN run fits and stylizes in one run; train it again with other --style images",
+            from.display()
+        )
+    }
+
+    fn new_model(cfg: &SirenRunConfig, _data: &SirenImages, device: &Device) -> Ins<SirenCim> {
+        cfg.build_model(device)
+    }
+
+    fn add_stylizer(
+        model: Ins<SirenCim>,
+        _cfg: &SirenRunConfig,
+        _n_styles: usize,
+        _device: &Device,
+    ) -> Ins<SirenCim> {
+        model
+    }
+
+    fn n_styles(model: &Ins<SirenCim>) -> usize {
+        model.n_styles()
+    }
+
+    fn decode_extra(_task_state: Option<&[u8]>, _at: &Path) -> Result<()> {
+        Ok(())
+    }
+
+    fn task(
+        cfg: &SirenRunConfig,
+        start: Start<Siren>,
+        style: Option<PerceptualLoss>,
+        _folder: &RunFolder,
+        device: &Device,
+    ) -> Result<ImageTask<SirenCim>> {
+        let Start::Fresh(images) = start else {
+            bail!("a SIREN run has no base run");
+        };
+        let perceptual = style.context("a SIREN run needs its paintings' loss")?;
+        let (w, h) = (images.content.width as u32, images.content.height as u32);
+        let patch = PatchSpec::spanning(
+            cfg.style.patch as u32,
+            cfg.style.stride as u32,
+            PATCH_SHARE,
+            w,
+            h,
+        )?;
+        ImageTask::new(images.content, perceptual, cfg.fit_batch, patch, device)
+    }
+
+    fn phases(
+        cfg: &SirenRunConfig,
+        _kind: RunKind,
+        weights: LossWeights,
+    ) -> Vec<Phase<ImageObjective>> {
+        cfg.phases(weights)
+    }
+
+    fn final_report(
+        model: &Ins<SirenCim>,
+        _task: &ImageTask<SirenCim>,
+        cfg: &SirenRunConfig,
+        folder: &RunFolder,
+        device: &Device,
+    ) -> Result<()> {
+        let images = load_images(cfg)?;
+        write_results(&model.valid(), &images, folder.dir(), device)?;
+        Ok(())
+    }
 }
 
 /// Writes `stylized[_i].png` per style and `preview.png` (content | styles | results).
 pub fn write_results(
-    cfg: &SirenRunConfig,
     model: &Ins<SirenCim>,
-    content: &RgbImage,
-    styles: &[RgbImage],
+    images: &SirenImages,
     out: &Path,
     device: &Device,
 ) -> Result<Vec<PathBuf>> {
     let model = model.clone().to_device(device);
+    let (content, styles) = (&images.content, &images.styles);
     let n = styles.len();
     let mut paths = Vec::new();
     let mut row = vec![content.clone()];
@@ -250,39 +313,13 @@ pub fn write_results(
     }
     row.extend(results);
     RgbImage::hstack(&row).save(&out.join("preview.png"))?;
-    let _ = cfg;
     Ok(paths)
 }
 
-/// A trained run loaded back for rendering.
-pub struct SirenRun {
-    /// Its configuration.
-    pub config: SirenRunConfig,
-    /// The model from the newest checkpoint.
-    pub model: Ins<SirenCim>,
-}
-
-impl SirenRun {
-    /// Loads `config.json` and the newest checkpoint of the run folder `dir`.
-    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
-        let config_path = dir.join("config.json");
-        if !config_path.exists() {
-            bail!(
-                "{} is not a SIREN run folder (no config.json)",
-                dir.display()
-            );
-        }
-        let config = SirenRunConfig::from_file(&config_path)?;
-        let store = CheckpointStore::new(dir.join("checkpoints"), 2);
-        let ckpt = store
-            .load_latest()?
-            .with_context(|| format!("{}: no checkpoint in the run folder", dir.display()))?;
-        let model = load_module_bytes(
-            config.build_model(device),
-            ckpt.model,
-            &store.dir().join("latest"),
-        )?;
-        Ok(Self { config, model })
+impl Run<Siren> {
+    /// The content's size at training time.
+    pub fn training_size(&self) -> (usize, usize) {
+        (self.data.content.width, self.data.content.height)
     }
 
     /// Renders at `w`×`h` with a style mix (normalised to sum 1).

@@ -10,7 +10,7 @@ use anyhow::Result;
 use burn::module::Param;
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{LossWeights, StyleTarget, content_loss, style_loss};
+use ins_core::loss::{LossWeights, PerceptualLoss, StyleLoss};
 use ins_core::train::{
     GroupSpec, LossTerms, Optimizable, Phase, StepContext, Task, TrainOptions, TrainOutcome,
     Trainer,
@@ -76,40 +76,37 @@ pub struct Stylize2dSettings {
 
 /// The task: fixed targets, one image to optimise.
 pub struct Stylize2dTask {
-    vgg: Vgg,
-    style: [Tensor<3>; 4],
+    perceptual: PerceptualLoss,
     content: Tensor<4>,
 }
 
-/// The painting's Gram targets, on the autodiff device the optimisation runs on: computed once
-/// and shared by every frame of a per-frame run (a VGG pass over the painting per frame would
-/// cost as much as a step).
-#[derive(Clone)]
-pub struct StyleGrams {
-    grams: [Tensor<3>; 4],
-}
-
-impl StyleGrams {
-    /// Targets of `style`, fitted within `style_size` pixels, for optimisations on `device`.
-    pub fn new(vgg: &Vgg, style: &RgbImage, style_size: usize, device: &Device) -> Self {
-        let ad = device.clone().autodiff();
-        let grams = StyleTarget::stacked_from_images(
-            &vgg.to_device(&ad),
-            std::slice::from_ref(style),
-            style_size,
-            &ad,
-        );
-        Self { grams }
-    }
+/// The painting's loss on the autodiff device the optimisation runs on: its targets are
+/// computed once and shared by every frame of a per-frame run (a VGG pass over the painting
+/// per frame would cost as much as a step).
+pub fn painting_loss(
+    vgg: &Vgg,
+    style: &RgbImage,
+    style_size: usize,
+    device: &Device,
+) -> PerceptualLoss {
+    let ad = device.clone().autodiff();
+    PerceptualLoss::new(
+        vgg.to_device(&ad),
+        std::slice::from_ref(style),
+        style_size,
+        StyleLoss::Gram,
+        &ad,
+    )
 }
 
 impl Stylize2dTask {
-    /// Targets of `content` through `vgg`, which lives on `device`, and the painting's `style`.
-    pub fn new(vgg: Vgg, content: &RgbImage, style: &StyleGrams, device: &Device) -> Self {
-        let content = vgg.features(content.to_tensor(device)).relu2_2.detach();
+    /// The task of stylizing `content` with the painting of `perceptual` (on the autodiff
+    /// device the optimisation runs on).
+    pub fn new(perceptual: PerceptualLoss, content: &RgbImage) -> Self {
+        let device = perceptual.codes.device();
+        let content = perceptual.content_target(content.to_tensor(&device));
         Self {
-            vgg,
-            style: style.grams.clone(),
+            perceptual,
             content,
         }
     }
@@ -128,10 +125,10 @@ impl Task for Stylize2dTask {
         model: &Canvas,
         _step: &StepContext<Stylize2dObjective>,
     ) -> Result<LossTerms> {
-        let feats = self.vgg.features(model.image());
+        let (style, content) = self.perceptual.terms(model.image(), &self.content);
         Ok(LossTerms::default()
-            .term("style", style_loss(&feats, &self.style))
-            .term("content", content_loss(&feats, &self.content)))
+            .term("style", style)
+            .term("content", content))
     }
 }
 
@@ -145,21 +142,20 @@ pub fn stylize(
     opts: TrainOptions,
     device: &Device,
 ) -> Result<(RgbImage, TrainOutcome<Canvas>)> {
-    let grams = StyleGrams::new(&vgg, style, settings.style_size, device);
-    stylize_with(content, &grams, vgg, settings, opts, device)
+    let perceptual = painting_loss(&vgg, style, settings.style_size, device);
+    stylize_with(content, &perceptual, settings, opts)
 }
 
-/// [`stylize`] against Gram targets computed beforehand (`settings.style_size` is theirs).
+/// [`stylize`] against a painting's loss built beforehand ([`painting_loss`];
+/// `settings.style_size` is its), on the loss's device.
 pub fn stylize_with(
     content: &RgbImage,
-    style: &StyleGrams,
-    vgg: Vgg,
+    perceptual: &PerceptualLoss,
     settings: &Stylize2dSettings,
     opts: TrainOptions,
-    device: &Device,
 ) -> Result<(RgbImage, TrainOutcome<Canvas>)> {
-    let ad = device.clone().autodiff();
-    let mut task = Stylize2dTask::new(vgg.to_device(&ad), content, style, &ad);
+    let ad = perceptual.codes.device();
+    let mut task = Stylize2dTask::new(perceptual.clone(), content);
     let phase = Phase::new(
         "stylize",
         Stylize2dObjective::Stylize,

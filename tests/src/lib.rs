@@ -79,23 +79,24 @@ pub fn small_config(
     styles: Vec<PathBuf>,
     size: usize,
 ) -> ins_models::siren::SirenRunConfig {
-    ins_models::siren::SirenRunConfig {
+    let mut cfg = ins_models::siren::SirenRunConfig {
         content: Some(content),
-        styles,
         size,
-        style_size: 64,
         fit_steps: 200,
         stylize_steps: 100,
         lr_fit: 1e-4,
         lr_stylize: 2e-4,
         fit_batch: size * size,
-        patch: size,
-        stride: 1,
         hidden: 128,
         depth: 3,
         checkpoint_every: 50,
         ..Default::default()
-    }
+    };
+    cfg.style.styles = styles;
+    cfg.style.style_size = 64;
+    cfg.style.patch = size;
+    cfg.style.stride = 1;
+    cfg
 }
 
 /// The part of `img` inside the bounding box of the pixels where `keep` is true (an object's
@@ -138,4 +139,34 @@ pub fn constant_colour_psnr(photos: &[(&[f32], Vec<bool>)]) -> f64 {
         .map(|p| (0..3).map(|c| (p[c] as f64 - mean[c]).powi(2)).sum::<f64>())
         .sum();
     ins_core::loss::psnr(se / (3.0 * n))
+}
+
+/// Trains a SIREN run of `cfg` with `vgg` (the shared run lifecycle, as `train siren` does).
+pub fn train_siren(
+    cfg: &ins_models::siren::SirenRunConfig,
+    vgg: vgg_import::Vgg,
+    device: &burn::prelude::Device,
+    opts: ins_core::train::TrainOptions,
+) -> anyhow::Result<
+    ins_core::train::TrainOutcome<ins_core::modules::ins::Ins<ins_core::modules::cim::SirenCim>>,
+> {
+    ins_models::run::train::<ins_models::siren::Siren>(cfg, Some(vgg), device, opts)
+}
+
+/// Runs `f` on its own thread and returns its result, or fails the test after `seconds`
+/// (naming `what`) instead of hanging it: a wgpu driver that deadlocks must fail a test, not
+/// stall CI. A thread that never returns is left behind; the test binary exits without it.
+pub fn within<T: Send + 'static>(
+    seconds: u64,
+    what: &str,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(f());
+    });
+    match rx.recv_timeout(std::time::Duration::from_secs(seconds)) {
+        Ok(v) => v,
+        Err(_) => panic!("{what} did not finish within {seconds} s"),
+    }
 }

@@ -3,13 +3,14 @@
 //! gradient, stylization changes the colours and not the silhouette, and a mesh comes out.
 
 use burn::prelude::*;
-use ins_core::data::synthetic::{SynthOptions, write_dtu};
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{StyleTarget, style_loss};
 use ins_core::render::sphere_tracing::TraceOptions;
 use ins_models::idr::eval::evaluate_views;
 use ins_models::idr::mesh::extract_mesh;
-use ins_models::idr::{IdrRun, IdrRunConfig, pretrain, stylize};
+use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
+use ins_models::run::train;
+use ins_scene::data::synthetic::{SynthOptions, write_dtu};
 use ins_tests::{quiet_options, real_vgg, save_image};
 
 fn stripes(size: usize) -> RgbImage {
@@ -47,14 +48,10 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     )
     .unwrap();
     let run_dir = dir.path().join("surface");
-    let cfg = IdrRunConfig {
-        scene: Some(scene),
-        downscale: 1,
+    let mut cfg = IdrRunConfig {
         holdout: 4,
-        steps: 400,
         rays: 1024,
         eval_every: 0,
-        checkpoint_every: 200,
         // The defaults (grid 512, colour width 128) are tuned on scan37 at 400×300; on this
         // 48-pixel scene they reach only 12.9 dB held-out (13.2 with width 64), where the
         // finer 1024 grid with the 64-wide colour network (the earlier defaults) reaches 15.0 dB.
@@ -62,15 +59,19 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
         color_width: 64,
         ..Default::default()
     };
-    let out = pretrain(&cfg, &device, quiet_options(&run_dir)).unwrap();
+    cfg.source.scene = Some(scene);
+    cfg.source.downscale = 1;
+    cfg.schedule.steps = 400;
+    cfg.schedule.checkpoint_every = 200;
+    let out = train::<Idr>(&cfg, None, &device, quiet_options(&run_dir)).unwrap();
     assert!(out.finished);
     let run = IdrRun::load(&run_dir, &device).unwrap();
-    let views = run.scene.split(ins_core::data::Split::Val).to_vec();
+    let views = run.scene().split(ins_scene::data::Split::Val).to_vec();
     assert!(!views.is_empty());
     let trace = TraceOptions::default();
     let evals = evaluate_views(
         &run.model.valid(),
-        &run.scene,
+        &run.scene(),
         &views,
         None,
         true,
@@ -99,23 +100,21 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     // Stylize: the surface is frozen by default, so the silhouette is the same; colours move.
     let style = save_image(dir.path(), "stripes.png", &stripes(64));
     let st_dir = dir.path().join("stylized");
-    let st = IdrRunConfig {
-        scene: None,
-        from: Some(run_dir.clone()),
-        styles: vec![style],
-        steps: 40,
-        patch: 24,
-        stride: 1,
-        style_size: 64,
-        ..cfg.clone()
-    };
+    let mut st = cfg.clone();
+    st.source.scene = None;
+    st.source.from = Some(run_dir.clone());
+    st.schedule.steps = 40;
+    st.style.styles = vec![style];
+    st.style.patch = 24;
+    st.style.stride = 1;
+    st.style.style_size = 64;
     let vgg = real_vgg(&device);
-    stylize(&st, vgg.clone(), &device, quiet_options(&st_dir)).unwrap();
+    train::<Idr>(&st, Some(vgg.clone()), &device, quiet_options(&st_dir)).unwrap();
     let srun = IdrRun::load(&st_dir, &device).unwrap();
     let code = srun.code(None, &device).unwrap();
     let after = evaluate_views(
         &srun.model.valid(),
-        &srun.scene,
+        &srun.scene(),
         &views,
         code,
         true,

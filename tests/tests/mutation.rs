@@ -13,9 +13,9 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use burn::prelude::*;
-use ins_core::data::synthetic::{SynthOptions, write_blender, write_dtu, write_llff};
-use ins_core::data::{LoadOptions, Scene};
 use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
+use ins_scene::data::synthetic::{SynthOptions, write_blender, write_dtu, write_llff};
+use ins_scene::data::{LoadOptions, Scene};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
@@ -271,7 +271,7 @@ fn png_and_jpeg_images() {
         let p = dir.path().join(name);
         img.save(&p).unwrap();
         run(name, &p, name, &|p| {
-            ins_core::data::images::read_image(p)
+            ins_scene::data::images::read_image(p)
                 .map(|_| ())
                 .map_err(err)
         });
@@ -377,7 +377,7 @@ fn optimizer_state() {
     let mut o = ins_tests::quiet_options(&run_dir);
     o.checkpoint_every = 2;
     o.stop_after = Some(2);
-    ins_models::siren::train(&cfg, ins_tests::real_vgg(&device), &device, o).unwrap();
+    ins_tests::train_siren(&cfg, ins_tests::real_vgg(&device), &device, o).unwrap();
     let ckpt_dir = CheckpointStore::new(run_dir.join("checkpoints"), 2)
         .latest_dir()
         .unwrap()

@@ -3,29 +3,31 @@
 //! while the depth stays that of the pretrained model, and the MLP variant trains.
 
 use burn::prelude::*;
-use ins_core::data::synthetic::{SynthOptions, write_blender};
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{StyleTarget, style_loss};
 use ins_core::modules::field::CimKind;
 use ins_models::nerf::eval::{ViewRender, evaluate_views, render_camera};
-use ins_models::nerf::run::heldout_views;
-use ins_models::nerf::{NerfRun, NerfRunConfig, pretrain, stylize};
+use ins_models::nerf::{Nerf, NerfRun, NerfRunConfig};
+use ins_models::run::scene::heldout_views;
+use ins_models::run::train;
+use ins_scene::data::synthetic::{SynthOptions, write_blender};
 use ins_tests::{quiet_options, real_vgg, save_image};
 
 /// A small grid configuration that trains in seconds.
 fn tiny(scene: &std::path::Path) -> NerfRunConfig {
-    NerfRunConfig {
-        scene: Some(scene.to_path_buf()),
-        downscale: 1,
-        steps: 600,
+    let mut cfg = NerfRunConfig {
         target_samples: 1 << 14,
         log2_table: 14,
         max_resolution: 128,
         occupancy_resolution: 32,
         eval_every: 0,
-        checkpoint_every: 200,
         ..Default::default()
-    }
+    };
+    cfg.source.scene = Some(scene.to_path_buf());
+    cfg.source.downscale = 1;
+    cfg.schedule.steps = 600;
+    cfg.schedule.checkpoint_every = 200;
+    cfg
 }
 
 /// Diagonal stripes, a style unlike anything in the scene.
@@ -75,14 +77,14 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     .unwrap();
     let run_dir = dir.path().join("pretrained");
     let cfg = tiny(&scene_dir);
-    let out = pretrain(&cfg, &device, quiet_options(&run_dir)).unwrap();
+    let out = train::<Nerf>(&cfg, None, &device, quiet_options(&run_dir)).unwrap();
     assert!(out.finished);
     assert!(run_dir.join("val/final.png").exists());
     let run = NerfRun::load(&run_dir, &device).unwrap();
-    let views = heldout_views(&run.scene);
+    let views = heldout_views(&run.scene());
     let evals = evaluate_views(
         &run.model.valid(),
-        &run.scene,
+        &run.scene(),
         &views,
         run.sampling(),
         None,
@@ -103,7 +105,7 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
         psnr > psnr_constant + 8.0,
         "held-out PSNR after pretraining {psnr:.2} dB is not clearly above a constant colour's {psnr_constant:.2} dB"
     );
-    let grid = run.grid.as_ref().unwrap();
+    let grid = run.grid().unwrap();
     assert!(
         grid.occupancy() < 0.5,
         "the occupancy grid did not prune: {}",
@@ -113,27 +115,24 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     // Stylize with stripes.
     let style = save_image(dir.path(), "stripes.png", &stripes(64));
     let st_dir = dir.path().join("stylized");
-    let st_cfg = NerfRunConfig {
-        scene: None,
-        from: Some(run_dir.clone()),
-        styles: vec![style],
-        steps: 150,
-        patch: 24,
-        stride: 2,
-        style_size: 64,
-        eval_every: 0,
-        checkpoint_every: 100,
-        ..cfg.clone()
-    };
+    let mut st_cfg = cfg.clone();
+    st_cfg.source.scene = None;
+    st_cfg.source.from = Some(run_dir.clone());
+    st_cfg.schedule.steps = 150;
+    st_cfg.schedule.checkpoint_every = 100;
+    st_cfg.style.styles = vec![style];
+    st_cfg.style.patch = 24;
+    st_cfg.style.stride = 2;
+    st_cfg.style.style_size = 64;
     let vgg = real_vgg(&device);
-    stylize(&st_cfg, vgg.clone(), &device, quiet_options(&st_dir)).unwrap();
+    train::<Nerf>(&st_cfg, Some(vgg.clone()), &device, quiet_options(&st_dir)).unwrap();
     let st = NerfRun::load(&st_dir, &device).unwrap();
     assert_eq!(st.model.n_styles(), 1);
-    let view = &st.scene.views[views[0]].camera;
+    let view = &st.scene().views[views[0]].camera;
     let code = st.code(None, &device).unwrap();
     let before = render_camera(
         &run.model.valid(),
-        &run.scene,
+        &run.scene(),
         view,
         run.sampling(),
         None,
@@ -143,7 +142,7 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     .unwrap();
     let after = render_camera(
         &st.model.valid(),
-        &st.scene,
+        st.scene(),
         view,
         st.sampling(),
         code,
@@ -176,16 +175,16 @@ fn mlp_nerf_trains_and_renders() {
     let scene_dir = dir.path().join("scene");
     write_blender(&scene_dir, &SynthOptions { size: 16, views: 4 }).unwrap();
     let run_dir = dir.path().join("mlp");
-    let cfg = NerfRunConfig {
+    let mut cfg = NerfRunConfig {
         cim: CimKind::Mlp,
-        steps: 30,
         rays: 128,
         coarse_samples: 16,
         fine_samples: 16,
-        lr: 5e-4,
         ..tiny(&scene_dir)
     };
-    let out = pretrain(&cfg, &device, quiet_options(&run_dir)).unwrap();
+    cfg.schedule.steps = 30;
+    cfg.schedule.lr = 5e-4;
+    let out = train::<Nerf>(&cfg, None, &device, quiet_options(&run_dir)).unwrap();
     assert!(
         out.last["mse"] < out.last["mse_coarse"].max(0.2),
         "{:?}",
@@ -208,8 +207,8 @@ fn mlp_nerf_trains_and_renders() {
     assert!(run.model.coarse.is_some());
     let r = render_camera(
         &run.model.valid(),
-        &run.scene,
-        &run.scene.views[0].camera,
+        &run.scene(),
+        &run.scene().views[0].camera,
         run.sampling(),
         None,
         run.background(),

@@ -4,8 +4,8 @@
 
 use burn::prelude::*;
 use ins_models::demo::{demo_content, demo_style};
-use ins_models::siren::{SirenRun, train};
-use ins_tests::{quiet_options, real_vgg, save_image, small_config};
+use ins_models::siren::SirenRun;
+use ins_tests::{quiet_options, real_vgg, save_image, small_config, train_siren as train};
 
 #[test]
 fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
@@ -18,7 +18,7 @@ fn checkpoint_reload_renders_identically_and_resume_continues_the_same_run() {
     cfg.hidden = 64;
     cfg.fit_steps = 20;
     cfg.stylize_steps = 10;
-    cfg.patch = 24;
+    cfg.style.patch = 24;
 
     // Uninterrupted.
     let a_dir = dir.path().join("a");

@@ -5,8 +5,8 @@ use burn::prelude::*;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{self, StyleTarget};
 use ins_models::demo::{demo_content, demo_style};
-use ins_models::siren::{SirenRun, train};
-use ins_tests::{quiet_options, real_vgg, save_image, small_config};
+use ins_models::siren::SirenRun;
+use ins_tests::{quiet_options, real_vgg, save_image, small_config, train_siren as train};
 use vgg_import::Vgg;
 
 /// Red and white diagonal stripes: a style nothing like the demo painting.

@@ -17,7 +17,7 @@ fn gatys_lowers_the_gram_distance_five_fold_and_keeps_the_content() {
     let settings = Stylize2dSettings {
         steps: 60,
         lr: 0.02,
-        weights: LossWeights::default_for(vgg.preprocess),
+        weights: LossWeights::default_for(vgg.preprocess, ins_core::loss::StyleLoss::Gram),
         style_size: 64,
     };
     let (result, outcome) = stylize(

@@ -2,11 +2,11 @@
 //! render whose depth is the analytic scene's exact depth must give back the analytic surface
 //! points, for a 360° scene and for a forward-facing one rendered in NDC.
 
-use ins_core::data::synthetic::{self, SynthOptions};
-use ins_core::data::{LoadOptions, Scene, SceneFormat};
-use ins_core::render::rays::camera_rays;
 use ins_models::nerf::eval::ViewRender;
 use ins_models::nerf::render::RenderRays;
+use ins_scene::data::synthetic::{self, SynthOptions};
+use ins_scene::data::{LoadOptions, Scene, SceneFormat};
+use ins_scene::rays::camera_rays;
 
 fn check(format: SceneFormat) {
     let dir = tempfile::tempdir().unwrap();

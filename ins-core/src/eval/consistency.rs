@@ -5,8 +5,8 @@
 use serde::Serialize;
 
 use super::warp::{GeoFrame, mean_defined, warp_forward};
-use crate::render::camera::Camera;
-use crate::render::geometry::Vec3;
+use ins_scene::camera::Camera;
+use ins_scene::geometry::Vec3;
 
 /// Relative depth tolerance of the occlusion test.
 pub const DEPTH_TOLERANCE: f32 = 0.02;
@@ -67,7 +67,7 @@ pub fn mean_rmse(scores: &[PairScore]) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::paths::turntable;
+    use ins_scene::paths::turntable;
 
     #[test]
     fn a_consistent_sequence_scores_below_a_flickering_one() {

@@ -3,8 +3,8 @@
 //! warped into its neighbour should match it wherever both see the same surface; what differs
 //! there is flicker, the thing 3D stylization is meant to remove.
 
-use crate::render::camera::Camera;
-use crate::render::geometry::Vec3;
+use ins_scene::camera::Camera;
+use ins_scene::geometry::Vec3;
 
 /// A rendered frame with the world point each pixel sees.
 #[derive(Debug, Clone, Copy)]
@@ -129,8 +129,8 @@ pub fn mean_defined(values: impl IntoIterator<Item = Option<f64>>) -> Option<f64
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::data::synthetic::{AnalyticScene, Rendering, Texture};
-    use crate::render::paths::turntable;
+    use ins_scene::data::synthetic::{AnalyticScene, Rendering, Texture};
+    use ins_scene::paths::turntable;
 
     fn cameras(n: usize, size: u32) -> Vec<Camera> {
         let template = Camera::from_fov_x(size, size, 0.7, [[1.0, 0.0, 0.0, 0.0]; 3]);

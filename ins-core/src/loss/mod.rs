@@ -9,10 +9,15 @@ pub mod gram_op;
 pub mod perceptual;
 pub mod pixel;
 pub mod ssim;
+pub mod style;
 pub mod weights;
 
 pub use gram::gram;
-pub use perceptual::{StyleTarget, content_distance, content_loss, style_distance, style_loss};
+pub use perceptual::{
+    PerceptualLoss, StyleTarget, content_distance, content_loss, one_hot_codes, patch_images,
+    photo_patch, style_distance, style_loss,
+};
 pub use pixel::{mse, psnr};
 pub use ssim::ssim;
+pub use style::{StyleLoss, StyleTargets};
 pub use weights::LossWeights;

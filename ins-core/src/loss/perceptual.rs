@@ -4,6 +4,7 @@ use burn::prelude::*;
 use vgg_import::{Vgg, VggFeatures};
 
 use super::gram::gram;
+use super::style::{StyleLoss, StyleTargets};
 
 /// Gram matrices of a style image at the four style layers, each `[1, C, C]`.
 #[derive(Clone, Debug)]
@@ -89,4 +90,91 @@ pub fn style_distance(vgg: &Vgg, rgb: Tensor<4>, targets: &[Tensor<3>; 4]) -> f6
 pub fn content_distance(vgg: &Vgg, rgb: Tensor<4>, reference: Tensor<4>) -> f64 {
     let target = vgg.features(reference).relu2_2;
     content_loss(&vgg.features(rgb), &target).into_scalar::<f32>() as f64
+}
+
+/// One-hot codes of `n` styles, `[n, n]`: every stylizing step renders its patch under each.
+pub fn one_hot_codes(n: usize, device: &Device) -> Tensor<2> {
+    let mut v = vec![0f32; n * n];
+    for i in 0..n {
+        v[i * n + i] = 1.0;
+    }
+    Tensor::from_data(TensorData::new(v, [n, n]), device)
+}
+
+/// The stylization loss every variant trains with (SIREN, NeRF, IDR, the 2D baseline and the
+/// benchmarks): a frozen VGG-16, each painting's style targets, and the one-hot codes under
+/// which a step renders its patch, one image per style.
+///
+/// A step hands [`PerceptualLoss::terms`] the rendered patches `[S, 3, K, K]` (row `i` under
+/// style `i`) and the relu2_2 features of the photo at the same pixels
+/// ([`PerceptualLoss::content_target`]); it gets back the `style` and `content` terms, which the
+/// phase weighs.
+#[derive(Clone)]
+pub struct PerceptualLoss {
+    /// Frozen VGG-16.
+    pub vgg: Vgg,
+    /// The paintings' targets (row `i`: style `i`) of the style term's kind.
+    pub targets: StyleTargets,
+    /// One-hot codes, `[S, S]`.
+    pub codes: Tensor<2>,
+}
+
+impl PerceptualLoss {
+    /// The loss of `styles`, each fitted within `style_size` pixels, matched by `kind`,
+    /// through `vgg` on `device` (the device the training runs on).
+    pub fn new(
+        vgg: Vgg,
+        styles: &[crate::imaging::RgbImage],
+        style_size: usize,
+        kind: StyleLoss,
+        device: &Device,
+    ) -> Self {
+        let paintings: Vec<Tensor<4>> = styles
+            .iter()
+            .map(|s| s.fit_within(style_size).to_tensor(device))
+            .collect();
+        let targets = StyleTargets::from_images(kind, &vgg, &paintings);
+        Self {
+            vgg,
+            targets,
+            codes: one_hot_codes(styles.len(), device),
+        }
+    }
+
+    /// Number of styles.
+    pub fn n_styles(&self) -> usize {
+        self.codes.dims()[0]
+    }
+
+    /// The code of the first style, `[1, S]`, on the inner (non-autodiff) device: what
+    /// evaluations during training render with.
+    pub fn first_code(&self) -> Tensor<2> {
+        self.codes.clone().slice([0..1]).inner()
+    }
+
+    /// The content target of a photo `[1, 3, H, W]`: its relu2_2 features, detached.
+    pub fn content_target(&self, photo: Tensor<4>) -> Tensor<4> {
+        self.vgg.features(photo).relu2_2.detach()
+    }
+
+    /// The `style` and `content` terms of rendered images `[S, 3, H, W]` against the targets
+    /// and `content_target` (broadcast over the styles).
+    pub fn terms(&self, images: Tensor<4>, content_target: &Tensor<4>) -> (Tensor<1>, Tensor<1>) {
+        let feats = self.vgg.features(images);
+        (
+            self.targets.loss(&feats),
+            content_loss(&feats, content_target),
+        )
+    }
+}
+
+/// Rendered patch rows → images: `[S·K·K, 3]` (or any shape holding them in that order, style
+/// by style, each row major) → `[S, 3, K, K]`, the layout VGG reads.
+pub fn patch_images<const D: usize>(rgb: Tensor<D>, styles: usize, k: usize) -> Tensor<4> {
+    rgb.reshape([styles, k, k, 3]).permute([0, 3, 1, 2])
+}
+
+/// A photo patch's pixels (row major, K·K of them) as an image `[1, 3, K, K]`.
+pub fn photo_patch(rgb: &[[f32; 3]], k: usize, device: &Device) -> Tensor<4> {
+    patch_images(Tensor::<1>::from_floats(rgb.as_flattened(), device), 1, k)
 }

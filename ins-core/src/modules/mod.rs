@@ -29,4 +29,5 @@ pub mod sim;
 pub mod sine;
 pub mod sine_op;
 pub mod softplus_op;
+pub mod style_position;
 pub mod surface_color;

@@ -12,8 +12,8 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::geometry::Vec3;
-use super::rays::Rays;
+use ins_scene::geometry::Vec3;
+use ins_scene::rays::Rays;
 
 /// A density grid with occupancy bits.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -182,7 +182,7 @@ impl OccupancyGrid {
     /// step evenly), keeping at most `max_per_ray` samples in occupied cells. Each ray's first
     /// sample is offset by a uniform fraction of a step drawn from `seed` (`None`: half a step).
     pub fn march(&self, rays: &Rays, max_per_ray: usize, seed: Option<u64>) -> MarchedSamples {
-        let bounds = super::geometry::Bounds::Aabb {
+        let bounds = ins_scene::geometry::Bounds::Aabb {
             min: Vec3::from(self.min),
             max: Vec3::from(self.max),
         };

@@ -14,7 +14,7 @@
 //! looks there): for a clear miss the vertex of the parabola through its three march samples
 //! around the smallest value, for the others the smallest of all their samples.
 
-use super::rays::Rays;
+use ins_scene::rays::Rays;
 
 /// Settings of the tracer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -361,7 +361,7 @@ pub fn sphere_trace(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::geometry::Vec3;
+    use ins_scene::geometry::Vec3;
 
     fn sphere(points: &[f32]) -> Vec<f32> {
         points

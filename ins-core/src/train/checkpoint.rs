@@ -116,7 +116,19 @@ impl CheckpointStore {
         names
     }
 
-    /// Writes a checkpoint atomically, points `latest` at it, then prunes old ones.
+    /// The model record inside the checkpoint folder `dir` (for messages naming it).
+    pub fn model_file(dir: &Path) -> PathBuf {
+        dir.join(MODEL)
+    }
+
+    /// The task's state inside the checkpoint folder `dir`.
+    pub fn task_file(dir: &Path) -> PathBuf {
+        dir.join(TASK)
+    }
+
+    /// Writes a checkpoint atomically, points `latest` at it, then prunes old ones. A write that
+    /// fails (a full disk, a file-size limit) removes what it had written and leaves the
+    /// previous checkpoint, and `latest`, as they were.
     pub fn save(&self, ckpt: &Checkpoint) -> Result<PathBuf, TrainError> {
         fs::create_dir_all(&self.dir).map_err(|e| TrainError::io(&self.dir, e))?;
         let existing = self.complete();
@@ -127,20 +139,40 @@ impl CheckpointStore {
         let name = format!("{prefix}{k:03}");
         let final_dir = self.dir.join(&name);
         let tmp = ins_io::temp_path_beside(&final_dir);
-        fs::create_dir_all(&tmp).map_err(|e| TrainError::io(&tmp, e))?;
+        let written = self.write_folder(ckpt, &tmp).and_then(|()| {
+            ins_io::publish_dir(&tmp, &final_dir)?;
+            ins_io::write_atomic(&self.latest_file(), name.as_bytes())
+        });
+        if let Err(source) = written {
+            fs::remove_dir_all(&tmp).ok();
+            return Err(TrainError::CheckpointWrite {
+                step: ckpt.step,
+                source,
+                last_good: self.latest_path(),
+            });
+        }
+        self.prune(&name);
+        Ok(final_dir)
+    }
+
+    /// The checkpoint's files, synced, in the folder `tmp`.
+    fn write_folder(&self, ckpt: &Checkpoint, tmp: &Path) -> Result<(), ins_io::IoError> {
+        fs::create_dir_all(tmp).map_err(|source| ins_io::IoError {
+            path: tmp.to_path_buf(),
+            source,
+        })?;
         ins_io::write_synced(&tmp.join(MODEL), &ckpt.model)?;
         fault_delay();
         ins_io::write_synced(&tmp.join(OPTIM), &ckpt.optim)?;
-        let state =
-            serde_json::to_vec_pretty(&ckpt.state).map_err(|e| TrainError::checkpoint(&tmp, e))?;
+        let state = serde_json::to_vec_pretty(&ckpt.state).map_err(|e| ins_io::IoError {
+            path: tmp.join(STATE),
+            source: std::io::Error::other(e),
+        })?;
         ins_io::write_synced(&tmp.join(STATE), &state)?;
         if let Some(task) = &ckpt.task {
             ins_io::write_synced(&tmp.join(TASK), task)?;
         }
-        ins_io::publish_dir(&tmp, &final_dir)?;
-        ins_io::write_atomic(&self.latest_file(), name.as_bytes())?;
-        self.prune(&name);
-        Ok(final_dir)
+        Ok(())
     }
 
     /// Removes all but the newest `keep` complete checkpoints (never the one `latest` names)
@@ -232,6 +264,11 @@ impl CheckpointStore {
             state,
             task,
         })
+    }
+
+    /// Whether a checkpoint was ever published here (a run folder that holds a run).
+    pub fn is_started(&self) -> bool {
+        self.latest_file().exists()
     }
 
     /// Path of the newest checkpoint's folder, for messages; `None` when there is none.

@@ -132,6 +132,30 @@ pub enum TrainError {
         /// The run folder.
         dir: PathBuf,
     },
+    /// Another process is training into the run folder.
+    #[error(
+        "{} is in use by another run (pid {pid}); wait for it to finish or choose another --out",
+        dir.display()
+    )]
+    RunInUse {
+        /// The run folder.
+        dir: PathBuf,
+        /// The process holding its lock, as written in `run.lock`.
+        pid: String,
+    },
+    /// A checkpoint could not be written (a full disk, a file-size limit).
+    #[error(
+        "writing the checkpoint of step {step} failed: {source}; {}. Free space (or raise the limit), then continue with --resume",
+        checkpoint_note(last_good)
+    )]
+    CheckpointWrite {
+        /// Global step of the checkpoint.
+        step: usize,
+        /// The failure, naming the file.
+        source: ins_io::IoError,
+        /// The newest complete checkpoint, untouched.
+        last_good: Option<PathBuf>,
+    },
     /// `--resume` without a checkpoint.
     #[error("--resume: no checkpoint in {} (start without --resume)", dir.display())]
     NothingToResume {

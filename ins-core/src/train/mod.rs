@@ -3,6 +3,7 @@
 
 pub mod checkpoint;
 pub mod error;
+pub mod folder;
 pub mod fused_adam;
 pub mod groups;
 pub mod guard;
@@ -16,8 +17,9 @@ pub mod task;
 pub mod trainer;
 
 pub use error::TrainError;
+pub use folder::{RunFolder, RunLock};
 pub use groups::{GroupSetting, GroupSpec, Optimizable, ParamGroups};
 pub use phase::{Objective, Phase};
 pub use schedule::LrSchedule;
 pub use task::{LossTerms, StepContext, Task};
-pub use trainer::{TrainOptions, TrainOutcome, Trainer, adam, step_seed};
+pub use trainer::{Stepper, TrainOptions, TrainOutcome, Trainer, adam, step_seed};

@@ -1,5 +1,6 @@
-//! The loss-curve figure of a run: one row per phase; losses on a log axis on the left, PSNR
-//! (dB, its own linear axis) on the right when the phase logs one. Text is drawn with an
+//! The figures of a run: the loss curves (one row per phase; losses on a log axis on the left,
+//! PSNR (dB, its own linear axis) on the right when the phase logs one), and the
+//! strength/consistency picture of a stylized run's evaluation. Text is drawn with an
 //! embedded font (a Latin subset of DejaVu Sans), so the figure looks the same on any machine.
 
 use std::collections::BTreeMap;
@@ -275,4 +276,85 @@ mod tests {
         };
         assert!(dark(0, 330) > 1000 && dark(340, 670) > 1000);
     }
+}
+
+/// One set of frames on the strength/consistency picture.
+#[derive(Debug, Clone)]
+pub struct StrengthPoint {
+    /// `stylized`, `baseline2d`, `pretrained`.
+    pub set: String,
+    /// Texture transfer (0: the pretrained frames, 1: the converged 2D reference).
+    pub texture: f64,
+    /// Masked warp RMSE at k = 1 and k = 7.
+    pub rmse: [Option<f64>; 2],
+}
+
+/// Draws texture transfer (x) against warp RMSE (y; circles k = 1, triangles k = 7) for each set,
+/// into a PNG at `path`: strength and consistency in one picture, the better corner bottom
+/// right.
+pub fn plot_strength_consistency(points: &[StrengthPoint], path: &Path) -> Result<()> {
+    register_font();
+    let (w, h) = (760u32, 480u32);
+    let xs = points.iter().map(|p| p.texture);
+    let x1 = xs.clone().fold(1.1f64, f64::max) + 0.1;
+    let x0 = xs.fold(-0.1f64, f64::min) - 0.05;
+    let y1 = points
+        .iter()
+        .flat_map(|p| p.rmse.iter().flatten().copied())
+        .fold(0.0f64, f64::max)
+        * 1.2
+        + 1e-3;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "texture transfer against view consistency",
+                (FAMILY, 18).into_font(),
+            )
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(64)
+            .build_cartesian_2d(x0..x1, 0.0..y1)
+            .map_err(draw_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("texture transfer (0: unstylized, 1: Gatys converged)")
+            .y_desc("warp RMSE (lower: more consistent)")
+            .label_style((FAMILY, 13).into_font())
+            .axis_desc_style((FAMILY, 14).into_font())
+            .draw()
+            .map_err(draw_err)?;
+        for (i, p) in points.iter().enumerate() {
+            let c = COLORS[i % COLORS.len()];
+            let x = p.texture;
+            if let Some(y) = p.rmse[0] {
+                chart
+                    .draw_series(std::iter::once(Circle::new((x, y), 7, c.filled())))
+                    .map_err(draw_err)?
+                    .label(format!("{} (● k=1, ▲ k=7)", p.set))
+                    .legend(move |(x, y)| Circle::new((x + 8, y), 6, c.filled()));
+            }
+            if let Some(y) = p.rmse[1] {
+                chart
+                    .draw_series(std::iter::once(TriangleMarker::new((x, y), 8, c.filled())))
+                    .map_err(draw_err)?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .label_font((FAMILY, 14).into_font())
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(draw_err)?;
+        root.present().map_err(draw_err)?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| anyhow!("plot buffer size"))?;
+    ins_io::write_atomic_with(path, |tmp| {
+        img.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(|e| anyhow!("writing {}: {e}", path.display()))
+    })
 }

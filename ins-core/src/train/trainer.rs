@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use super::checkpoint::{Checkpoint, CheckpointStore, load_module_bytes, module_bytes};
 use super::error::TrainError;
+use super::folder::RunFolder;
 use super::fused_adam::FusedAdam;
 use super::groups::ParamGroups;
 use super::guard::StepValues;
@@ -130,7 +131,7 @@ impl<O: Objective> Trainer<O> {
     }
 
     fn store(&self) -> CheckpointStore {
-        CheckpointStore::new(self.opts.out_dir.join("checkpoints"), 2)
+        RunFolder::new(&self.opts.out_dir).checkpoints()
     }
 
     /// Trains `model` on `task`, resuming from the run folder's newest checkpoint if asked.
@@ -147,7 +148,7 @@ impl<O: Objective> Trainer<O> {
         std::fs::create_dir_all(out).map_err(|e| TrainError::io(out, e))?;
         let store = self.store();
         let (mut model, mut optim, mut state) = self.start(&store, task, model)?;
-        let mut log = MetricsLog::rewrite(&out.join("metrics.jsonl"), &state.history)?;
+        let mut log = MetricsLog::rewrite(&RunFolder::new(out).metrics(), &state.history)?;
 
         let total = self.total_steps();
         let start = state.step;
@@ -195,10 +196,7 @@ impl<O: Objective> Trainer<O> {
             }
             // A loss no parameter reaches (an IDR patch whose rays all missed the surface) has
             // nothing to teach: the step is logged and the parameters and Adam stay as they are.
-            if values.total.is_tracked() {
-                let grads = GradientsParams::from_grads(values.total.backward(), &model);
-                model = optim.step(groups.learning_rates(lr, &phase.groups), model, grads);
-            }
+            model = update(model, &mut optim, &groups, phase, lr, &values.total);
             let extra = task.after_step(&model, &ctx)?;
             step += 1;
 
@@ -262,7 +260,7 @@ impl<O: Objective> Trainer<O> {
             ..Default::default()
         };
         if !self.opts.resume {
-            if store.dir().join("latest").exists() {
+            if store.is_started() {
                 return Err(TrainError::RunExists {
                     dir: self.opts.out_dir.clone(),
                 });
@@ -310,7 +308,7 @@ impl<O: Objective> Trainer<O> {
 
     /// Redraws `loss_curve.png`. A plot that cannot be drawn is reported, not fatal.
     fn write_plot<T: Task<Objective = O>>(&self, state: &TrainerState, task: &T) {
-        let path = self.opts.out_dir.join("loss_curve.png");
+        let path = RunFolder::new(&self.opts.out_dir).loss_curve();
         let mut terms: Vec<&str> = Vec::new();
         for phase in &self.phases {
             terms.extend_from_slice(task.terms(phase.objective));
@@ -323,6 +321,86 @@ impl<O: Objective> Trainer<O> {
     /// The run folder.
     pub fn out_dir(&self) -> &Path {
         &self.opts.out_dir
+    }
+}
+
+/// Back-propagates a step's weighted total and takes the Adam step with the phase's learning
+/// rates. A total no parameter reaches (an IDR patch whose rays all missed the surface) has
+/// nothing to teach: the parameters and Adam stay as they are.
+fn update<M: Module>(
+    model: M,
+    optim: &mut ModuleOptimizer,
+    groups: &ParamGroups,
+    phase: &Phase<impl Objective>,
+    lr: f64,
+    total: &Tensor<1>,
+) -> M {
+    if !total.is_tracked() {
+        return model;
+    }
+    let grads = GradientsParams::from_grads(total.clone().backward(), &model);
+    optim.step(groups.learning_rates(lr, &phase.groups), model, grads)
+}
+
+/// One phase's training step outside a run, exactly as the trainer takes it (the task's terms
+/// weighted by the phase, backward, Adam with the phase's groups): what the benchmarks time.
+pub struct Stepper<O> {
+    phase: Phase<O>,
+    groups: ParamGroups,
+    optim: ModuleOptimizer,
+    step: usize,
+}
+
+impl<O: Objective> Stepper<O> {
+    /// A stepper for `phase` on `model` (its groups checked, the phase's freezing applied to the
+    /// returned model), declared terms checked against `terms`.
+    pub fn new<M: super::groups::Optimizable>(
+        phase: Phase<O>,
+        model: M,
+        terms: &[&str],
+    ) -> Result<(Self, M), TrainError> {
+        let groups = ParamGroups::resolve(&model)?;
+        phase.validate(&groups, terms)?;
+        let model = groups.apply_freezing(model, &phase.groups);
+        Ok((
+            Self {
+                phase,
+                groups,
+                optim: adam(),
+                step: 0,
+            },
+            model,
+        ))
+    }
+
+    /// Takes one step of `task` on `model`; returns the updated model, the weighted loss and
+    /// the step's metrics (the task's and those of its `after_step`).
+    pub fn step<T: Task<Objective = O>>(
+        &mut self,
+        task: &mut T,
+        model: T::Model,
+    ) -> Result<(T::Model, f64, Vec<(String, f64)>), TrainError> {
+        let ctx = StepContext {
+            phase: &self.phase,
+            step_in_phase: self.step,
+            global_step: self.step,
+            seed: step_seed(0, self.step),
+        };
+        let lr = self.phase.lr.at(self.step);
+        let terms = task.losses(&model, &ctx)?;
+        let values = StepValues::read(&terms, &self.phase, self.step, lr, || None)?;
+        let model = update(
+            model,
+            &mut self.optim,
+            &self.groups,
+            &self.phase,
+            lr,
+            &values.total,
+        );
+        let mut metrics = terms.metrics.clone();
+        metrics.extend(task.after_step(&model, &ctx)?);
+        self.step += 1;
+        Ok((model, values.total_value, metrics))
     }
 }
 

@@ -1,40 +1,42 @@
 //! The configuration of an IDR run: `ins-cli train idr` flags and the run's `config.json`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
 use super::model::{IdrArch, SdfKind};
+use crate::run::args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};
 
 /// Everything that defines an IDR run, pretraining (`--scene`) or stylization (`--from`).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
-#[serde(default, deny_unknown_fields)]
+#[serde(default)]
 pub struct IdrRunConfig {
-    /// DTU/IDR scene folder (cameras.npz, image/, mask/) to pretrain on.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Pretrained IDR run to stylize.
-    #[arg(long)]
-    pub from: Option<PathBuf>,
-    /// Style image; repeat for a conditional multi-style model (stylization only).
-    #[arg(long = "style")]
-    pub styles: Vec<PathBuf>,
+    /// Scene or base run.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub source: SourceArgs,
+    /// Steps, learning rate, seed, checkpoints.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub schedule: ScheduleArgs,
+    /// Paintings and the perceptual loss.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub style: StyleArgs,
+    /// SIM size.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub stylizer: StylizerArgs,
     /// SDF network: grid (fast, default) or mlp (IDR's 8×512).
     #[arg(long, default_value = "grid")]
     pub sdf: SdfKind,
-    /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
-    #[arg(long, default_value_t = 0)]
-    pub downscale: u32,
     /// Hold out every K-th view for evaluation (0: train on all views).
     #[arg(long, default_value_t = 0)]
     pub holdout: usize,
     /// Train without masks (every pixel counts as the object; no mask loss): a weaker result.
     #[arg(long)]
     pub no_mask: bool,
-    /// Training steps (0: 12000 pretraining, 400 stylizing).
-    #[arg(long, default_value_t = 0)]
-    pub steps: usize,
     /// Rays per pretraining step.
     #[arg(long, default_value_t = 2048)]
     pub rays: usize,
@@ -44,10 +46,6 @@ pub struct IdrRunConfig {
     /// spread), and helped early with `--color-grid` (see the README).
     #[arg(long, default_value_t = 0.0)]
     pub mask_rays: f32,
-    /// Adam learning rate (0: 5e-3 grid / 1e-4 mlp pretraining, 5e-3 grid / 1e-3 mlp
-    /// stylizing).
-    #[arg(long, default_value_t = 0.0)]
-    pub lr: f64,
     /// Pretraining: the learning rate falls exponentially to this fraction of `--lr` by the
     /// last step. On scan37 at 400×300 over 4000 steps, 0.1 gave 18.37 dB held-out masked PSNR
     /// and 0.01 gave 17.56.
@@ -89,37 +87,10 @@ pub struct IdrRunConfig {
     /// on 2 cores).
     #[arg(long, default_value_t = 2000)]
     pub eval_every: usize,
-    /// Stylization: rays per patch side.
-    #[arg(long, default_value_t = 64)]
-    pub patch: usize,
-    /// Stylization: pixels between patch rays (0: the window spans about half the image).
-    #[arg(long, default_value_t = 0)]
-    pub stride: usize,
-    /// Stylization: longer side of the style images for their Gram targets.
-    #[arg(long, default_value_t = 256)]
-    pub style_size: usize,
-    /// Stylization: style loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    pub style_weight: Option<f64>,
-    /// Stylization: content loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    pub content_weight: Option<f64>,
     /// Stylization: SDF learning rate as a fraction of the others' (the paper: 1e-11, in
     /// effect frozen; 0 freezes the surface outright).
     #[arg(long, default_value_t = 0.0)]
     pub sdf_lr_ratio: f64,
-    /// Stylization: SIM width.
-    #[arg(long, default_value_t = 64)]
-    pub sim_width: usize,
-    /// Stylization: octaves of the position encoding fed to the SIM.
-    #[arg(long, default_value_t = 4)]
-    pub position_freqs: usize,
-    /// Seed.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Steps between checkpoints.
-    #[arg(long, default_value_t = 500)]
-    pub checkpoint_every: usize,
 }
 
 impl Default for IdrRunConfig {
@@ -128,37 +99,15 @@ impl Default for IdrRunConfig {
     }
 }
 
-/// Pretraining or stylizing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum IdrKind {
-    /// `--scene`.
-    Pretrain,
-    /// `--from`.
-    Stylize,
-}
-
 impl IdrRunConfig {
     /// Reads a run's `config.json`.
     pub fn from_file(path: &Path) -> Result<Self> {
         crate::config::read_json(path)
     }
 
-    /// Which kind of run this is.
-    pub fn kind(&self) -> Result<IdrKind> {
-        match (&self.scene, &self.from) {
-            (Some(_), None) if self.styles.is_empty() => Ok(IdrKind::Pretrain),
-            (Some(_), None) => bail!(
-                "--style needs --from RUN (stylize a pretrained IDR run); pretrain with --scene first"
-            ),
-            (None, Some(_)) if !self.styles.is_empty() => Ok(IdrKind::Stylize),
-            (None, Some(_)) => bail!("stylizing (--from) needs at least one --style image"),
-            (Some(_), Some(_)) => {
-                bail!("give either --scene (pretrain) or --from (stylize), not both")
-            }
-            (None, None) => bail!(
-                "give --scene DIR to pretrain a surface, or --from RUN --style IMG to stylize one"
-            ),
-        }
+    /// Which kind of run this is (see [`SourceArgs::kind`]).
+    pub fn kind(&self) -> Result<RunKind> {
+        self.source.kind(&self.style.styles, "a surface")
     }
 
     /// The model sizes.
@@ -173,26 +122,35 @@ impl IdrRunConfig {
     }
 
     /// Steps to run.
-    pub fn steps_for(&self, kind: IdrKind) -> usize {
-        match (self.steps, kind) {
-            (0, IdrKind::Pretrain) => 12000,
-            (0, IdrKind::Stylize) => 400,
+    pub fn steps_for(&self, kind: RunKind) -> usize {
+        match (self.schedule.steps, kind) {
+            (0, RunKind::Pretrain) => 12000,
+            (0, RunKind::Stylize) => 400,
             (n, _) => n,
         }
     }
 
     /// Learning rate.
-    pub fn lr_for(&self, kind: IdrKind) -> f64 {
-        if self.lr > 0.0 {
-            return self.lr;
+    pub fn lr_for(&self, kind: RunKind) -> f64 {
+        if self.schedule.lr > 0.0 {
+            return self.schedule.lr;
         }
         match (kind, self.sdf) {
-            (IdrKind::Pretrain, SdfKind::Grid) => 5e-3,
-            (IdrKind::Pretrain, SdfKind::Mlp) => 1e-4,
+            (RunKind::Pretrain, SdfKind::Grid) => 5e-3,
+            (RunKind::Pretrain, SdfKind::Mlp) => 1e-4,
             // On scan37 at 1e-3 the style loss had barely moved after 200 steps; at 5e-3 it
             // fell 4.6× over the 400 (1.7e6 to 3.7e5, the mean of the last 40).
-            (IdrKind::Stylize, SdfKind::Grid) => 5e-3,
-            (IdrKind::Stylize, SdfKind::Mlp) => 1e-3,
+            (RunKind::Stylize, SdfKind::Grid) => 5e-3,
+            (RunKind::Stylize, SdfKind::Mlp) => 1e-3,
+        }
+    }
+
+    /// SIM width (0 in the config: 64).
+    pub fn sim_width_for(&self) -> usize {
+        if self.stylizer.sim_width > 0 {
+            self.stylizer.sim_width
+        } else {
+            64
         }
     }
 }

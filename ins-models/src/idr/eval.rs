@@ -5,13 +5,13 @@ use std::path::Path;
 
 use anyhow::Result;
 use burn::prelude::*;
-use ins_core::data::Scene;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::psnr;
-use ins_core::render::camera::Camera;
-use ins_core::render::geometry::Vec3;
-use ins_core::render::rays::{Rays, camera_rays};
 use ins_core::render::sphere_tracing::TraceOptions;
+use ins_scene::camera::Camera;
+use ins_scene::data::Scene;
+use ins_scene::geometry::Vec3;
+use ins_scene::rays::{Rays, camera_rays};
 
 use super::model::IdrModel;
 use super::render::render_surface;
@@ -30,6 +30,8 @@ pub struct SurfaceView {
     pub rgb: Vec<f32>,
     /// Whether each pixel's ray meets the surface.
     pub hit: Vec<bool>,
+    /// Distance along each pixel's ray to the surface (meaningful where it hits).
+    pub depth: Vec<f32>,
     /// Normals shaded as an image (`(n + 1) / 2`), white background.
     pub normals: Vec<f32>,
 }
@@ -78,6 +80,7 @@ pub fn render_rays(
         height,
         rgb: Vec::with_capacity(n * 3),
         hit: Vec::with_capacity(n),
+        depth: Vec::with_capacity(n),
         normals: vec![1.0; n * 3],
     };
     let mut start = 0;
@@ -92,6 +95,7 @@ pub fn render_rays(
         let out = render_surface(model, &chunk, code.clone(), [0.0; 3], trace, false, device);
         view.rgb.extend(to_vec(out.rgb)?);
         view.hit.extend(out.traced.hit.iter().copied());
+        view.depth.extend(out.traced.t.iter().copied());
         if let Some(g) = out.surface_gradients {
             let g = to_vec(g)?;
             for (k, &i) in out.hits.iter().enumerate() {

@@ -18,4 +18,4 @@ pub mod task;
 
 pub use config::IdrRunConfig;
 pub use model::IdrModel;
-pub use run::{IdrRun, pretrain, stylize};
+pub use run::{Idr, IdrRun};

@@ -3,11 +3,11 @@
 //! AM that fuses them into the SDF features the rendering network sees.
 
 use burn::prelude::*;
-use ins_core::modules::encoding::FourierEncoding;
 use ins_core::modules::hash_grid::HashGridConfig;
 use ins_core::modules::radiance_am::FeatureBlend;
 use ins_core::modules::sdf::{SdfGridConfig, SdfMlpConfig, SdfNet};
 use ins_core::modules::sim::{Sim, SimConfig};
+use ins_core::modules::style_position::{StylePosition, StylePositionConfig};
 use ins_core::modules::surface_color::{SurfaceColor, SurfaceColorConfig};
 use ins_core::train::{GroupSpec, Optimizable};
 use serde::{Deserialize, Serialize};
@@ -50,8 +50,8 @@ pub struct SurfaceStylizer {
     pub sim: Sim,
     /// Fuses them into the SDF features (γ starts at 1: identity).
     pub am: FeatureBlend,
-    /// Octaves of the position encoding the SIM sees.
-    pub position_freqs: usize,
+    /// The SIM's view of a position (octaves, and a texture grid where configured).
+    pub position: StylePosition,
 }
 
 /// The model of an IDR run.
@@ -76,13 +76,21 @@ const STYLIZED: &[GroupSpec] = &[
     GroupSpec::new("am", &["stylizer.am.layers"]),
     GroupSpec::new("blend", &["stylizer.am.gamma"]),
 ];
+const TEXTURED: &[GroupSpec] = &[
+    GroupSpec::new("sdf", &["sdf"]),
+    GroupSpec::new("color", &["color"]),
+    GroupSpec::new("sim", &["stylizer.sim"]),
+    GroupSpec::new("texture", &["stylizer.position"]),
+    GroupSpec::new("am", &["stylizer.am.layers"]),
+    GroupSpec::new("blend", &["stylizer.am.gamma"]),
+];
 
 impl Optimizable for IdrModel {
     fn groups(&self) -> &'static [GroupSpec] {
-        if self.stylizer.is_some() {
-            STYLIZED
-        } else {
-            PLAIN
+        match &self.stylizer {
+            None => PLAIN,
+            Some(s) if s.position.grid.is_some() => TEXTURED,
+            Some(_) => STYLIZED,
         }
     }
 }
@@ -176,15 +184,17 @@ impl IdrModel {
         }
     }
 
-    /// Adds a fresh SIM and AM (identity) for `n_styles` styles.
+    /// Adds a fresh SIM and AM (identity) for `n_styles` styles, the SIM seeing positions
+    /// through `position`.
     pub fn with_stylizer(
         mut self,
         n_styles: usize,
         width: usize,
-        position_freqs: usize,
+        position: &StylePositionConfig,
         device: &Device,
     ) -> Self {
-        let d_pos = FourierEncoding::new(position_freqs).d_out(3);
+        let position = position.init(device);
+        let d_pos = position.d_out();
         let sim = SimConfig::new(n_styles)
             .with_d_hidden(width)
             .with_depth(4)
@@ -192,11 +202,7 @@ impl IdrModel {
             .with_d_position(d_pos)
             .init(device);
         let am = FeatureBlend::new(self.sdf.d_features(), width, width, 2, device);
-        self.stylizer = Some(SurfaceStylizer {
-            sim,
-            am,
-            position_freqs,
-        });
+        self.stylizer = Some(SurfaceStylizer { sim, am, position });
         self
     }
 
@@ -232,7 +238,7 @@ impl IdrModel {
                     .reshape([s * count, w])
             }
         };
-        let pos = FourierEncoding::new(st.position_freqs).encode(x.clone());
+        let pos = st.position.encode(x.clone());
         let code_rows = codes
             .reshape([s, 1, k])
             .expand([s, count, k])

@@ -3,9 +3,9 @@
 //! so colour gradients reach the SDF; shade with the normal ∇f(x(θ)) under every style.
 
 use burn::prelude::*;
-use ins_core::render::geometry::Vec3;
-use ins_core::render::rays::{Rays, flatten};
 use ins_core::render::sphere_tracing::{TraceOptions, Traced, sphere_trace};
+use ins_scene::geometry::Vec3;
+use ins_scene::rays::{Rays, flatten};
 
 use super::model::IdrModel;
 use ins_core::modules::sdf::SdfNet;
@@ -148,7 +148,7 @@ mod tests {
     use super::*;
     use burn::module::Param;
     use ins_core::modules::sdf::SdfMlpConfig;
-    use ins_core::render::geometry::Vec3;
+    use ins_scene::geometry::Vec3;
 
     /// The derivative of the surface point in a weight of the SDF equals finite differences of
     /// re-traced surfaces.

@@ -1,24 +1,37 @@
-//! IDR runs end to end: pretraining a surface on a masked multi-view scene, stylizing it, and
-//! loading a run folder back.
+//! IDR on the shared run layer: what an IDR run loads, builds, trains and reports. Pretraining
+//! reconstructs a surface from masked photos; stylizing trains SIM + AM inside the rendering
+//! network with the perceptual loss on patches inside the mask, the surface frozen by default.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
-use ins_core::data::{LoadOptions, Scene, SceneFormat, Split, detect_format};
-use ins_core::imaging::RgbImage;
-use ins_core::loss::{LossWeights, StyleTarget};
-use ins_core::render::patches::PatchSpec;
-use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
-use ins_core::train::{LrSchedule, Phase, TrainOptions, TrainOutcome, Trainer};
-use vgg_import::Vgg;
+use ins_core::loss::{LossWeights, PerceptualLoss};
+use ins_core::modules::style_position::TEXTURE_LR_MULT;
+use ins_core::train::{LrSchedule, Phase, RunFolder};
+use ins_scene::data::{Scene, SceneFormat, Split, detect_format};
+use ins_scene::patches::PatchSpec;
 
-use super::config::{IdrKind, IdrRunConfig};
+use super::config::IdrRunConfig;
 use super::eval::{evaluate_views, save_pictures};
 use super::model::IdrModel;
 use super::task::{IdrObjective, IdrTask, SurfaceStylization};
-use crate::image_task::one_hot_codes;
-use crate::nerf::config::auto_downscale;
+use crate::run::{Run, RunKind, Start, StyleArgs, Variant};
+
+/// IDR + INS.
+pub struct Idr;
+
+/// An IDR run folder loaded back.
+pub type IdrRun = Run<Idr>;
+
+/// Share of the image's shorter side a stylization patch spans (see `PatchSpec::spanning`).
+pub const PATCH_SHARE: f32 = 0.5;
+
+/// Learning-rate multiplier of the AM's blend weight γ. The SIM's features reach the colour
+/// only as far as γ leaves 1, and Adam moves γ by about one learning rate per step: at the
+/// others' rate (1e-3) the style loss on scan37 stayed flat for 160 of 200 steps, until γ had
+/// moved.
+pub const BLEND_LR_MULT: f64 = 10.0;
 
 /// Loads a DTU/IDR scene for surface reconstruction: the format must be DTU (unit-sphere frame
 /// and masks), masks must exist unless `no_mask`, and every `holdout`-th view goes to val.
@@ -35,20 +48,7 @@ pub fn load_scene(
             path.display()
         );
     }
-    let factor = if downscale == 0 {
-        let probe = Scene::load(path, &LoadOptions::default())?;
-        let (w, h) = probe.resolution();
-        auto_downscale(w, h, 512)
-    } else {
-        downscale
-    };
-    let mut scene = Scene::load(
-        path,
-        &LoadOptions {
-            downscale: factor,
-            ..Default::default()
-        },
-    )?;
+    let (mut scene, _, factor) = crate::run::scene::load_scene(path, downscale)?;
     if !no_mask && !scene.views.iter().all(|v| v.mask.is_some()) {
         bail!(
             "{}: IDR needs an object mask per view (mask/ folder); pass --no-mask to train without them (colour only on the whole image, a weaker surface)",
@@ -66,13 +66,198 @@ pub fn load_scene(
     Ok((scene, factor))
 }
 
-/// Pretrains a surface on `cfg.scene` into `opts.out_dir`.
-pub fn pretrain(
-    cfg: &IdrRunConfig,
-    device: &Device,
-    opts: TrainOptions,
-) -> Result<TrainOutcome<IdrModel>> {
-    let scene_path = cfg.scene.clone().context("pretraining needs --scene DIR")?;
+impl Variant for Idr {
+    const NAME: &'static str = "IDR";
+    type Config = IdrRunConfig;
+    type Data = Scene;
+    type Model = IdrModel;
+    type Objective = IdrObjective;
+    type Task = IdrTask;
+    type Extra = ();
+
+    fn kind(cfg: &IdrRunConfig) -> Result<RunKind> {
+        let kind = cfg.kind()?;
+        if kind == RunKind::Pretrain {
+            validate_pretraining(cfg)?;
+        }
+        Ok(kind)
+    }
+
+    fn style(cfg: &IdrRunConfig) -> &StyleArgs {
+        &cfg.style
+    }
+
+    fn style_mut(cfg: &mut IdrRunConfig) -> &mut StyleArgs {
+        &mut cfg.style
+    }
+
+    fn base_run(cfg: &IdrRunConfig) -> Option<&Path> {
+        cfg.source.from.as_deref()
+    }
+
+    fn seed(cfg: &IdrRunConfig) -> u64 {
+        cfg.schedule.seed
+    }
+
+    fn load_data(cfg: &mut IdrRunConfig) -> Result<Scene> {
+        let path = cfg
+            .source
+            .scene
+            .clone()
+            .context("pretraining needs --scene DIR")?;
+        let (scene, factor) = load_scene(&path, cfg.source.downscale, cfg.holdout, cfg.no_mask)?;
+        cfg.source.downscale = factor;
+        Ok(scene)
+    }
+
+    fn resolve(cfg: &mut IdrRunConfig, kind: RunKind, _data: &Scene) {
+        cfg.schedule.steps = cfg.steps_for(kind);
+        cfg.schedule.lr = cfg.lr_for(kind);
+        cfg.style.resolve(64, 256);
+        cfg.stylizer.sim_width = cfg.sim_width_for();
+    }
+
+    fn inherit(cfg: &mut IdrRunConfig, base: &IdrRunConfig, from: &Path) -> Result<()> {
+        if cfg.sdf != base.sdf {
+            bail!(
+                "--sdf {} does not match the pretrained run {} (--sdf {})",
+                cfg.sdf,
+                from.display(),
+                base.sdf
+            );
+        }
+        cfg.source.downscale = base.source.downscale;
+        cfg.holdout = base.holdout;
+        cfg.no_mask = base.no_mask;
+        cfg.init_radius = base.init_radius;
+        Ok(())
+    }
+
+    fn new_model(cfg: &IdrRunConfig, _data: &Scene, device: &Device) -> IdrModel {
+        IdrModel::new(&cfg.arch(), device)
+    }
+
+    fn add_stylizer(
+        model: IdrModel,
+        cfg: &IdrRunConfig,
+        n_styles: usize,
+        device: &Device,
+    ) -> IdrModel {
+        model.with_stylizer(
+            n_styles,
+            cfg.sim_width_for(),
+            &cfg.stylizer.position(),
+            device,
+        )
+    }
+
+    fn n_styles(model: &IdrModel) -> usize {
+        model.n_styles()
+    }
+
+    fn decode_extra(_task_state: Option<&[u8]>, _at: &Path) -> Result<()> {
+        Ok(())
+    }
+
+    fn task(
+        cfg: &IdrRunConfig,
+        start: Start<Idr>,
+        style: Option<PerceptualLoss>,
+        folder: &RunFolder,
+        device: &Device,
+    ) -> Result<IdrTask> {
+        match start {
+            Start::Fresh(scene) => {
+                let views = scene.split(Split::Val).to_vec();
+                pretrain_task(cfg, scene, views, folder.val_dir(), device)
+            }
+            Start::From(base) => {
+                let perceptual = style.context("stylizing needs the paintings' loss")?;
+                let scene = base.data;
+                let (w, h) = scene.resolution();
+                let patch = PatchSpec::spanning(
+                    cfg.style.patch as u32,
+                    cfg.style.stride as u32,
+                    PATCH_SHARE,
+                    w,
+                    h,
+                )?;
+                let style = SurfaceStylization { perceptual, patch };
+                let views = scene.split(Split::Val).to_vec();
+                Ok(IdrTask::new(
+                    scene,
+                    cfg.rays,
+                    cfg.schedule.steps,
+                    !cfg.no_mask,
+                    Some(style),
+                    cfg.eval_every,
+                    views,
+                    folder.val_dir(),
+                    device,
+                ))
+            }
+        }
+    }
+
+    fn phases(cfg: &IdrRunConfig, kind: RunKind, weights: LossWeights) -> Vec<Phase<IdrObjective>> {
+        let phase = match kind {
+            RunKind::Pretrain => pretrain_phase(cfg),
+            RunKind::Stylize => {
+                let (steps, lr) = (cfg.schedule.steps, cfg.schedule.lr);
+                let mut phase = Phase::new("stylize", IdrObjective::Stylize, steps, lr)
+                    .lr_mult("blend", BLEND_LR_MULT)
+                    .weight("style", weights.style)
+                    .weight("content", weights.content);
+                if cfg.stylizer.sim_grid > 0 {
+                    phase = phase.lr_mult("texture", TEXTURE_LR_MULT);
+                }
+                if cfg.sdf_lr_ratio > 0.0 {
+                    phase.lr_mult("sdf", cfg.sdf_lr_ratio)
+                } else {
+                    phase.freeze("sdf")
+                }
+            }
+        };
+        vec![phase]
+    }
+
+    /// Renders up to six held-out views (two training views without any): `val/final.png`.
+    fn final_report(
+        model: &IdrModel,
+        task: &IdrTask,
+        _cfg: &IdrRunConfig,
+        folder: &RunFolder,
+        device: &Device,
+    ) -> Result<()> {
+        let views: Vec<usize> = if task.eval_views.is_empty() {
+            task.scene
+                .split(Split::Train)
+                .iter()
+                .copied()
+                .take(2)
+                .collect()
+        } else {
+            task.eval_views.iter().copied().take(6).collect()
+        };
+        let code = task
+            .style
+            .as_ref()
+            .map(|s| s.perceptual.first_code().to_device(device));
+        let evals = evaluate_views(
+            &model.valid().to_device(device),
+            &task.scene,
+            &views,
+            code,
+            task.masked,
+            &task.trace,
+            device,
+        )?;
+        save_pictures(&evals, &folder.final_picture())
+    }
+}
+
+/// Pretraining options out of range, refused before anything is loaded or written.
+fn validate_pretraining(cfg: &IdrRunConfig) -> Result<()> {
     cfg.arch().validate().map_err(anyhow::Error::msg)?;
     if !(0.0..=1.0).contains(&cfg.mask_rays) {
         bail!(
@@ -86,23 +271,7 @@ pub fn pretrain(
             cfg.lr_decay
         );
     }
-    let (scene, factor) = load_scene(&scene_path, cfg.downscale, cfg.holdout, cfg.no_mask)?;
-    let mut cfg = cfg.clone();
-    cfg.downscale = factor;
-    cfg.steps = cfg.steps_for(IdrKind::Pretrain);
-    cfg.lr = cfg.lr_for(IdrKind::Pretrain);
-    let out = opts.out_dir.clone();
-    crate::config::write_run_config(&cfg, &out, opts.resume)?;
-    let ad = device.clone().autodiff();
-    let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || IdrModel::new(&cfg.arch(), &ad));
-    let views = scene.split(Split::Val).to_vec();
-    let mut task = pretrain_task(&cfg, scene, views, out.join("val"), &ad)?;
-    let phase = pretrain_phase(&cfg);
-    let outcome = Trainer::new(vec![phase], opts).run(&mut task, model)?;
-    if outcome.finished {
-        final_pictures(&outcome.model, &task, &out, device)?;
-    }
-    Ok(outcome)
+    Ok(())
 }
 
 /// The pretraining task of `cfg` (steps resolved) on `scene`: its rays, masks and eikonal
@@ -117,7 +286,7 @@ pub fn pretrain_task(
     let mut task = IdrTask::new(
         scene,
         cfg.rays,
-        cfg.steps,
+        cfg.schedule.steps,
         !cfg.no_mask,
         None,
         cfg.eval_every,
@@ -133,11 +302,12 @@ pub fn pretrain_task(
 /// The pretraining phase of `cfg` (steps and learning rate resolved): the decaying learning
 /// rate and the weights of the colour, mask and eikonal terms.
 pub fn pretrain_phase(cfg: &IdrRunConfig) -> Phase<IdrObjective> {
-    let phase = Phase::new("pretrain", IdrObjective::Pretrain, cfg.steps, cfg.lr)
+    let (steps, lr) = (cfg.schedule.steps, cfg.schedule.lr);
+    let phase = Phase::new("pretrain", IdrObjective::Pretrain, steps, lr)
         .schedule(LrSchedule {
-            base: cfg.lr,
+            base: lr,
             decay: cfg.lr_decay,
-            decay_steps: cfg.steps as f64,
+            decay_steps: steps as f64,
         })
         .weight("rgb", 1.0)
         .weight("mse_mask", 0.0)
@@ -149,207 +319,14 @@ pub fn pretrain_phase(cfg: &IdrRunConfig) -> Phase<IdrObjective> {
     }
 }
 
-fn final_pictures(model: &IdrModel, task: &IdrTask, out: &Path, device: &Device) -> Result<()> {
-    let views: Vec<usize> = if task.eval_views.is_empty() {
-        task.scene
-            .split(Split::Train)
-            .iter()
-            .copied()
-            .take(2)
-            .collect()
-    } else {
-        task.eval_views.iter().copied().take(6).collect()
-    };
-    let code = task
-        .style
-        .as_ref()
-        .map(|s| s.codes.clone().slice([0..1]).inner().to_device(device));
-    let evals = evaluate_views(
-        &model.valid().to_device(device),
-        &task.scene,
-        &views,
-        code,
-        task.masked,
-        &task.trace,
-        device,
-    )?;
-    save_pictures(&evals, &out.join("val").join("final.png"))
-}
-
-/// A run folder loaded back.
-pub struct IdrRun {
-    /// The run folder.
-    pub dir: PathBuf,
-    /// Its configuration.
-    pub config: IdrRunConfig,
-    /// The pretrained run's configuration, for a stylized run.
-    pub base: Option<IdrRunConfig>,
+impl Run<Idr> {
     /// The scene at the run's resolution, with the run's held-out views.
-    pub scene: Scene,
-    /// The model of the newest checkpoint.
-    pub model: IdrModel,
-}
-
-impl IdrRun {
-    /// Loads `dir` (written by `train idr`).
-    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
-        let config_path = dir.join("config.json");
-        if !config_path.is_file() {
-            bail!(
-                "{} is not an IDR run folder (no config.json)",
-                dir.display()
-            );
-        }
-        let config = IdrRunConfig::from_file(&config_path)
-            .with_context(|| format!("{} is not an IDR run", dir.display()))?;
-        let base = match config.kind()? {
-            IdrKind::Pretrain => None,
-            IdrKind::Stylize => {
-                let from = config.from.clone().expect("kind checked");
-                Some(
-                    IdrRunConfig::from_file(&from.join("config.json"))
-                        .with_context(|| format!("the base run of {}", dir.display()))?,
-                )
-            }
-        };
-        let scene_cfg = base.as_ref().unwrap_or(&config);
-        let scene_path = scene_cfg
-            .scene
-            .clone()
-            .context("the base run has no scene")?;
-        let (scene, _) = load_scene(
-            &scene_path,
-            scene_cfg.downscale,
-            scene_cfg.holdout,
-            scene_cfg.no_mask,
-        )?;
-        let store = CheckpointStore::new(dir.join("checkpoints"), 2);
-        let latest = store
-            .latest_dir()?
-            .with_context(|| format!("{}: no checkpoint in the run folder", dir.display()))?;
-        let ckpt = CheckpointStore::load_dir(&latest)?;
-        let mut model = IdrModel::new(&scene_cfg.arch(), device);
-        if base.is_some() {
-            model = model.with_stylizer(
-                config.styles.len(),
-                config.sim_width,
-                config.position_freqs,
-                device,
-            );
-        }
-        let model = load_module_bytes(model, ckpt.model, &latest.join("model.bpk"))?;
-        Ok(Self {
-            dir: dir.to_path_buf(),
-            config,
-            base,
-            scene,
-            model,
-        })
+    pub fn scene(&self) -> &Scene {
+        &self.data
     }
 
     /// Whether masks were used.
     pub fn masked(&self) -> bool {
-        !self.base.as_ref().unwrap_or(&self.config).no_mask
+        !self.scene_config().no_mask
     }
-
-    /// A style code `[1, n]` from mix weights, or `None` for an unstylized run.
-    pub fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
-        crate::style_mix::code(self.model.n_styles(), mix, &self.dir, device)
-    }
-}
-
-/// Learning-rate multiplier of the AM's blend weight γ. The SIM's features reach the colour
-/// only as far as γ leaves 1, and Adam moves γ by about one learning rate per step: at the
-/// others' rate (1e-3) the style loss on scan37 stayed flat for 160 of 200 steps, until γ had
-/// moved.
-pub const BLEND_LR_MULT: f64 = 10.0;
-
-/// Stylizes the pretrained run `cfg.from` into `opts.out_dir`.
-pub fn stylize(
-    cfg: &IdrRunConfig,
-    vgg: Vgg,
-    device: &Device,
-    opts: TrainOptions,
-) -> Result<TrainOutcome<IdrModel>> {
-    cfg.kind()?;
-    let from = cfg.from.clone().context("stylizing needs --from RUN")?;
-    let base = IdrRun::load(&from, device)?;
-    if base.base.is_some() {
-        bail!(
-            "{} is already a stylized run; stylize its pretrained run instead",
-            from.display()
-        );
-    }
-    if cfg.sdf != base.config.sdf {
-        bail!(
-            "--sdf {} does not match the pretrained run {} (--sdf {})",
-            cfg.sdf,
-            from.display(),
-            base.config.sdf
-        );
-    }
-    let styles: Vec<RgbImage> = cfg
-        .styles
-        .iter()
-        .map(|p| RgbImage::load(p))
-        .collect::<Result<_>>()?;
-    let mut cfg = cfg.clone();
-    cfg.downscale = base.config.downscale;
-    cfg.holdout = base.config.holdout;
-    cfg.no_mask = base.config.no_mask;
-    cfg.init_radius = base.config.init_radius;
-    cfg.steps = cfg.steps_for(IdrKind::Stylize);
-    cfg.lr = cfg.lr_for(IdrKind::Stylize);
-    let out = opts.out_dir.clone();
-    crate::config::write_run_config(&cfg, &out, opts.resume)?;
-    let ad = device.clone().autodiff();
-    let n = styles.len();
-    let model = ins_core::train::seeding::seeded(&ad, cfg.seed, || {
-        base.model
-            .clone()
-            .to_device(&ad)
-            .with_stylizer(n, cfg.sim_width, cfg.position_freqs, &ad)
-    });
-    let vgg = vgg.to_device(&ad);
-    let (w, h) = base.scene.resolution();
-    let stride = if cfg.stride > 0 {
-        cfg.stride as u32
-    } else {
-        ((0.5 * w.min(h) as f32 / cfg.patch.max(1) as f32).round() as u32).max(1)
-    };
-    let patch = PatchSpec::new(cfg.patch as u32, stride).fitted(w, h)?;
-    let weights = LossWeights::or_defaults(vgg.preprocess, cfg.content_weight, cfg.style_weight);
-    let targets = StyleTarget::stacked_from_images(&vgg, &styles, cfg.style_size, &ad);
-    let style = SurfaceStylization {
-        vgg,
-        targets,
-        codes: one_hot_codes(n, &ad),
-        patch,
-    };
-    let views = base.scene.split(Split::Val).to_vec();
-    let mut task = IdrTask::new(
-        base.scene,
-        cfg.rays,
-        cfg.steps,
-        !cfg.no_mask,
-        Some(style),
-        cfg.eval_every,
-        views,
-        out.join("val"),
-        &ad,
-    );
-    let mut phase = Phase::new("stylize", IdrObjective::Stylize, cfg.steps, cfg.lr)
-        .lr_mult("blend", BLEND_LR_MULT)
-        .weight("style", weights.style)
-        .weight("content", weights.content);
-    phase = if cfg.sdf_lr_ratio > 0.0 {
-        phase.lr_mult("sdf", cfg.sdf_lr_ratio)
-    } else {
-        phase.freeze("sdf")
-    };
-    let outcome = Trainer::new(vec![phase], opts).run(&mut task, model)?;
-    if outcome.finished {
-        final_pictures(&outcome.model, &task, &out, device)?;
-    }
-    Ok(outcome)
 }

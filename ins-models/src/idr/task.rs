@@ -5,17 +5,16 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use burn::prelude::*;
-use ins_core::data::{Scene, Split};
-use ins_core::loss::{content_loss, psnr, style_loss};
-use ins_core::render::mask_sampler::MaskedPixels;
-use ins_core::render::patches::{PatchSampler, PatchSpec};
-use ins_core::render::rays::RaySampler;
+use ins_core::loss::{PerceptualLoss, patch_images, photo_patch, psnr};
 use ins_core::render::sphere_tracing::TraceOptions;
 use ins_core::train::{LossTerms, StepContext, Task};
+use ins_scene::data::{Scene, Split};
+use ins_scene::mask_sampler::MaskedPixels;
+use ins_scene::patches::{PatchSampler, PatchSpec};
+use ins_scene::rays::RaySampler;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
-use vgg_import::Vgg;
 
 use super::eval::{evaluate_views, save_pictures};
 use super::model::IdrModel;
@@ -38,12 +37,8 @@ pub const PATCH_COVERAGE: f32 = 0.9;
 
 /// What stylization needs.
 pub struct SurfaceStylization {
-    /// Frozen VGG-16.
-    pub vgg: Vgg,
-    /// Gram targets per style layer.
-    pub targets: [Tensor<3>; 4],
-    /// One-hot codes.
-    pub codes: Tensor<2>,
+    /// VGG, the paintings' targets and the style codes.
+    pub perceptual: PerceptualLoss,
     /// Patch geometry.
     pub patch: PatchSpec,
 }
@@ -226,38 +221,34 @@ impl IdrTask {
             .with_min_coverage(PATCH_COVERAGE);
         let patch = sampler.sample(&self.scene, Split::Train)?;
         let k = style.patch.size as usize;
+        let perceptual = &style.perceptual;
         let out = render_surface(
             model,
             &patch.batch.rays,
-            Some(style.codes.clone()),
+            Some(perceptual.codes.clone()),
             [0.0; 3],
             &self.trace,
             true,
             &self.device,
         );
-        let s = style.codes.dims()[0];
-        let images = out.rgb.reshape([s, k, k, 3]).permute([0, 3, 1, 2]);
+        let images = patch_images(out.rgb, perceptual.n_styles(), k);
         // The photo inside its mask, on the same black background as the render.
-        let mask: Vec<f32> = if self.masked {
-            patch.batch.mask.clone()
+        let photo: Vec<[f32; 3]> = if self.masked {
+            patch
+                .batch
+                .rgb
+                .iter()
+                .zip(&patch.batch.mask)
+                .map(|(c, m)| c.map(|v| v * m))
+                .collect()
         } else {
-            vec![1.0; k * k]
+            patch.batch.rgb.clone()
         };
-        let photo: Vec<f32> = patch
-            .batch
-            .rgb
-            .iter()
-            .zip(&mask)
-            .flat_map(|(c, m)| c.map(|v| v * m))
-            .collect();
-        let photo = Tensor::<1>::from_floats(photo.as_slice(), &self.device)
-            .reshape([1, k, k, 3])
-            .permute([0, 3, 1, 2]);
-        let content_target = style.vgg.features(photo).relu2_2.detach();
-        let feats = style.vgg.features(images);
+        let content_target = perceptual.content_target(photo_patch(&photo, k, &self.device));
+        let (style_term, content_term) = perceptual.terms(images, &content_target);
         Ok(LossTerms::default()
-            .term("style", style_loss(&feats, &style.targets))
-            .term("content", content_loss(&feats, &content_target))
+            .term("style", style_term)
+            .term("content", content_term)
             .metric("hit_rate", out.hits.len() as f64 / (k * k) as f64)
             .metric("trace_ms", out.trace_ms))
     }
@@ -296,10 +287,7 @@ impl Task for IdrTask {
         }
         let m = model.valid();
         let device = self.device.clone().inner();
-        let code = self
-            .style
-            .as_ref()
-            .map(|s| s.codes.clone().slice([0..1]).inner());
+        let code = self.style.as_ref().map(|s| s.perceptual.first_code());
         let evals = evaluate_views(
             &m,
             &self.scene,

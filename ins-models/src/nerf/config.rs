@@ -1,40 +1,38 @@
 //! The configuration of a NeRF run: `ins-cli train nerf` flags and the run's `config.json`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{Result, bail};
-use ins_core::data::SceneFormat;
+use anyhow::Result;
 use ins_core::modules::field::CimKind;
+use ins_scene::data::SceneFormat;
 use serde::{Deserialize, Serialize};
 
 use super::model::NerfArch;
+use crate::run::args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};
 
 /// Everything that defines a NeRF run, pretraining (`--scene`) or stylization (`--from`).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
-#[serde(default, deny_unknown_fields)]
+#[serde(default)]
 pub struct NerfRunConfig {
-    /// Scene folder (Blender, LLFF or DTU) to pretrain on.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Pretrained NeRF run to stylize (its scene, model and occupancy grid are reused).
-    #[arg(long)]
-    pub from: Option<PathBuf>,
-    /// Style image; repeat for a conditional multi-style model (stylization only).
-    #[arg(long = "style")]
-    pub styles: Vec<PathBuf>,
+    /// Scene or base run.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub source: SourceArgs,
+    /// Steps, learning rate, seed, checkpoints.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub schedule: ScheduleArgs,
+    /// Paintings and the perceptual loss.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub style: StyleArgs,
+    /// SIM size.
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub stylizer: StylizerArgs,
     /// Content module: grid (fast, default) or mlp (the paper's NeRF, slow on a CPU).
     #[arg(long, default_value = "grid")]
     pub cim: CimKind,
-    /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
-    #[arg(long, default_value_t = 0)]
-    pub downscale: u32,
-    /// Training steps (0: pretraining 1000 with the grid, 4000 on forward-facing LLFF scenes,
-    /// 200000 with the mlp; stylizing 600 / 50000).
-    #[arg(long, default_value_t = 0)]
-    pub steps: usize,
-    /// Adam learning rate (0: 1e-2 for grid, 5e-4 for mlp pretraining; 1e-3 / 1e-4 stylizing).
-    #[arg(long, default_value_t = 0.0)]
-    pub lr: f64,
     /// Grid: fine samples per step the ray count adapts to.
     #[arg(long, default_value_t = 1 << 17)]
     pub target_samples: usize,
@@ -68,21 +66,6 @@ pub struct NerfRunConfig {
     /// Held-out views rendered per evaluation during training.
     #[arg(long, default_value_t = 4)]
     pub eval_views: usize,
-    /// Stylization: rays per patch side (K).
-    #[arg(long, default_value_t = 64)]
-    pub patch: usize,
-    /// Stylization: pixels between patch rays (0: chosen so the window spans half the image).
-    #[arg(long, default_value_t = 0)]
-    pub stride: usize,
-    /// Stylization: longer side of the style images for their Gram targets.
-    #[arg(long, default_value_t = 256)]
-    pub style_size: usize,
-    /// Stylization: style loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    pub style_weight: Option<f64>,
-    /// Stylization: content loss weight (default: per VGG preprocessing).
-    #[arg(long)]
-    pub content_weight: Option<f64>,
     /// Stylization: weight of the geometry loss mean|σ_teacher − σ|. Large because the style
     /// term it competes with is ~1e6 (Gram distances in VGG's units): at 1 the density drifted
     /// (lego: mean |Δσ| 2.0, holes in the depth), at 1e5 it stays (2e-4) and the style loss
@@ -92,18 +75,6 @@ pub struct NerfRunConfig {
     /// Stylization: also stylize the density (the paper); off keeps the pretrained density.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub stylize_density: bool,
-    /// Stylization: SIM width (0: 64 for grid, 256 for mlp).
-    #[arg(long, default_value_t = 0)]
-    pub sim_width: usize,
-    /// Stylization: octaves of the position encoding fed to the SIM.
-    #[arg(long, default_value_t = 4)]
-    pub position_freqs: usize,
-    /// Seed.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Steps between checkpoints.
-    #[arg(long, default_value_t = 500)]
-    pub checkpoint_every: usize,
 }
 
 impl Default for NerfRunConfig {
@@ -112,46 +83,15 @@ impl Default for NerfRunConfig {
     }
 }
 
-/// Whether a run pretrains a field or stylizes a pretrained one.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RunKind {
-    /// `--scene`.
-    Pretrain,
-    /// `--from`.
-    Stylize,
-}
-
 impl NerfRunConfig {
     /// Reads a run's `config.json`.
     pub fn from_file(path: &Path) -> Result<Self> {
         crate::config::read_json(path)
     }
 
-    /// Which kind of run this is; an error when both or neither of `--scene` and `--from` are
-    /// given, or styles come without `--from`.
+    /// Which kind of run this is (see [`SourceArgs::kind`]).
     pub fn kind(&self) -> Result<RunKind> {
-        match (&self.scene, &self.from) {
-            (Some(_), None) => {
-                if !self.styles.is_empty() {
-                    bail!(
-                        "--style needs --from RUN (stylize a pretrained NeRF); pretrain with --scene first"
-                    );
-                }
-                Ok(RunKind::Pretrain)
-            }
-            (None, Some(_)) => {
-                if self.styles.is_empty() {
-                    bail!("stylizing (--from) needs at least one --style image");
-                }
-                Ok(RunKind::Stylize)
-            }
-            (Some(_), Some(_)) => {
-                bail!("give either --scene (pretrain) or --from (stylize), not both")
-            }
-            (None, None) => bail!(
-                "give --scene DIR to pretrain a NeRF, or --from RUN --style IMG to stylize one"
-            ),
-        }
+        self.source.kind(&self.style.styles, "a NeRF")
     }
 
     /// The model sizes.
@@ -167,7 +107,7 @@ impl NerfRunConfig {
     /// held-out views keep improving long after a 360° scene's have settled (fern, grid: 21.9 dB
     /// at 1000 steps, 24.1 at step 3000 of a 4000-step run).
     pub fn pretrain_steps_for(&self, format: SceneFormat) -> usize {
-        match (self.steps, self.cim, format) {
+        match (self.schedule.steps, self.cim, format) {
             (0, CimKind::Grid, SceneFormat::Llff) => 4000,
             _ => self.steps_for(RunKind::Pretrain),
         }
@@ -175,8 +115,8 @@ impl NerfRunConfig {
 
     /// Steps to run (the default depends on the kind and the content module).
     pub fn steps_for(&self, kind: RunKind) -> usize {
-        if self.steps > 0 {
-            return self.steps;
+        if self.schedule.steps > 0 {
+            return self.schedule.steps;
         }
         match (kind, self.cim) {
             (RunKind::Pretrain, CimKind::Grid) => 1000,
@@ -188,8 +128,8 @@ impl NerfRunConfig {
 
     /// Learning rate (the default depends on the kind and the content module).
     pub fn lr_for(&self, kind: RunKind) -> f64 {
-        if self.lr > 0.0 {
-            return self.lr;
+        if self.schedule.lr > 0.0 {
+            return self.schedule.lr;
         }
         match (kind, self.cim) {
             (RunKind::Pretrain, CimKind::Grid) => 1e-2,
@@ -201,8 +141,8 @@ impl NerfRunConfig {
 
     /// SIM width.
     pub fn sim_width_for(&self) -> usize {
-        if self.sim_width > 0 {
-            self.sim_width
+        if self.stylizer.sim_width > 0 {
+            self.stylizer.sim_width
         } else if self.cim == CimKind::Grid {
             64
         } else {
@@ -222,11 +162,12 @@ mod tests {
     use super::*;
 
     fn config(steps: usize, cim: CimKind) -> NerfRunConfig {
-        NerfRunConfig {
-            steps,
+        let mut cfg = NerfRunConfig {
             cim,
             ..Default::default()
-        }
+        };
+        cfg.schedule.steps = steps;
+        cfg
     }
 
     #[test]

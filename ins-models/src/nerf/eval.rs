@@ -5,12 +5,12 @@ use std::path::Path;
 
 use anyhow::Result;
 use burn::prelude::*;
-use ins_core::data::{Scene, SceneFormat};
 use ins_core::imaging::{RgbImage, depth_image};
 use ins_core::loss::{psnr, ssim};
-use ins_core::render::camera::Camera;
-use ins_core::render::geometry::Vec3;
-use ins_core::render::rays::camera_rays;
+use ins_scene::camera::Camera;
+use ins_scene::data::{Scene, SceneFormat};
+use ins_scene::geometry::Vec3;
+use ins_scene::rays::camera_rays;
 
 use super::model::NerfModel;
 use super::render::{RenderRays, Sampling, render};

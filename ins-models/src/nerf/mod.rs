@@ -6,12 +6,10 @@
 //! - [`model`]: the field (hash grid or NeRF MLP), coarse field, SIM and AM composed.
 //! - [`render`]: sampling along rays, evaluating the field under every style, compositing.
 //! - [`task`]: the losses of each phase, occupancy refresh, held-out evaluation.
-//! - [`run`]: pretraining, stylizing and loading run folders.
+//! - [`run`]: the NeRF variant of the shared run layer (pretrain, stylize, load).
 //! - [`eval`]: whole-view renders and their PSNR / SSIM.
-//! - [`consistency`]: view consistency along a path, style and content distances per view.
 
 pub mod config;
-pub mod consistency;
 pub mod eval;
 pub mod model;
 pub mod render;
@@ -21,4 +19,4 @@ pub mod task;
 
 pub use config::NerfRunConfig;
 pub use model::NerfModel;
-pub use run::{NerfRun, pretrain, stylize};
+pub use run::{Nerf, NerfRun};

@@ -5,13 +5,13 @@
 
 use burn::prelude::*;
 use ins_core::modules::color_head::{ColorHeadConfig, DirEncoding};
-use ins_core::modules::encoding::FourierEncoding;
 use ins_core::modules::field::{CimKind, Field, Geometry};
 use ins_core::modules::grid_field::GridGeometryConfig;
 use ins_core::modules::hash_grid::HashGridConfig;
 use ins_core::modules::mlp_field::MlpGeometryConfig;
 use ins_core::modules::radiance_am::{RadianceAm, RadianceAmConfig};
 use ins_core::modules::sim::{Sim, SimConfig};
+use ins_core::modules::style_position::{StylePosition, StylePositionConfig};
 use ins_core::train::{GroupSpec, Optimizable};
 
 /// SIM and AM: what stylization adds to a pretrained field.
@@ -21,8 +21,8 @@ pub struct Stylizer {
     pub sim: Sim,
     /// Fuses style features into density and features.
     pub am: RadianceAm,
-    /// Octaves of the position encoding the SIM sees.
-    pub position_freqs: usize,
+    /// The SIM's view of a position (octaves, and a texture grid where configured).
+    pub position: StylePosition,
 }
 
 /// The model of a NeRF run.
@@ -106,14 +106,37 @@ const MLP_STYLIZED: &[GroupSpec] = &[
     GroupSpec::new("am_density", &["stylizer.am.density"]),
     GroupSpec::new("am_color", &["stylizer.am.feature"]),
 ];
+const GRID_TEXTURED: &[GroupSpec] = &[
+    GroupSpec::new("geometry", &["field.geometry"]),
+    GroupSpec::new("color", &["field.color"]),
+    GroupSpec::new("sim", &["stylizer.sim"]),
+    GroupSpec::new("texture", &["stylizer.position"]),
+    GroupSpec::new("am_density", &["stylizer.am.density"]),
+    GroupSpec::new("am_color", &["stylizer.am.feature"]),
+];
+const MLP_TEXTURED: &[GroupSpec] = &[
+    GroupSpec::new("geometry", &["field.geometry"]),
+    GroupSpec::new("color", &["field.color"]),
+    GroupSpec::new("coarse", &["coarse"]),
+    GroupSpec::new("sim", &["stylizer.sim"]),
+    GroupSpec::new("texture", &["stylizer.position"]),
+    GroupSpec::new("am_density", &["stylizer.am.density"]),
+    GroupSpec::new("am_color", &["stylizer.am.feature"]),
+];
 
 impl Optimizable for NerfModel {
     fn groups(&self) -> &'static [GroupSpec] {
-        match (self.coarse.is_some(), self.stylizer.is_some()) {
-            (false, false) => GRID,
-            (true, false) => MLP,
-            (false, true) => GRID_STYLIZED,
-            (true, true) => MLP_STYLIZED,
+        let textured = self
+            .stylizer
+            .as_ref()
+            .is_some_and(|s| s.position.grid.is_some());
+        match (self.coarse.is_some(), self.stylizer.is_some(), textured) {
+            (false, false, _) => GRID,
+            (true, false, _) => MLP,
+            (false, true, false) => GRID_STYLIZED,
+            (true, true, false) => MLP_STYLIZED,
+            (false, true, true) => GRID_TEXTURED,
+            (true, true, true) => MLP_TEXTURED,
         }
     }
 }
@@ -139,16 +162,18 @@ impl NerfModel {
         }
     }
 
-    /// Adds a fresh SIM and AM (AM = identity) for `n_styles` styles. The MLP variant follows
-    /// the authors' sizes (AM feature branch of 4 layers); the grid variant a 2-layer one.
+    /// Adds a fresh SIM and AM (AM = identity) for `n_styles` styles, the SIM seeing positions
+    /// through `position`. The MLP variant follows the authors' sizes (AM feature branch of 4
+    /// layers); the grid variant a 2-layer one.
     pub fn with_stylizer(
         mut self,
         n_styles: usize,
         sim_width: usize,
-        position_freqs: usize,
+        position: &StylePositionConfig,
         device: &Device,
     ) -> Self {
-        let d_pos = FourierEncoding::new(position_freqs).d_out(3);
+        let position = position.init(device);
+        let d_pos = position.d_out();
         let sim = SimConfig::new(n_styles)
             .with_d_hidden(sim_width)
             .with_depth(4)
@@ -160,11 +185,7 @@ impl NerfModel {
             .with_d_hidden(sim_width)
             .with_feature_depth(feature_depth)
             .init(device);
-        self.stylizer = Some(Stylizer {
-            sim,
-            am,
-            position_freqs,
-        });
+        self.stylizer = Some(Stylizer { sim, am, position });
         self
     }
 
@@ -227,7 +248,7 @@ impl NerfModel {
                     .reshape([s * n, w])
             }
         };
-        let pos = FourierEncoding::new(st.position_freqs).encode(self.unit_positions(x));
+        let pos = st.position.encode(self.unit_positions(x));
         let code_rows = codes
             .reshape([s, 1, k])
             .expand([s, n, k])

@@ -2,12 +2,12 @@
 //! variant, coarse-to-fine for the MLP), evaluate the field (under every style), composite.
 
 use burn::prelude::*;
-use ins_core::data::{Scene, SceneFormat};
-use ins_core::render::geometry::Vec3;
 use ins_core::render::occupancy::OccupancyGrid;
-use ins_core::render::rays::{RayBatch, Rays, flatten};
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite};
+use ins_scene::data::{Scene, SceneFormat};
+use ins_scene::geometry::Vec3;
+use ins_scene::rays::{RayBatch, Rays, flatten};
 
 use super::model::NerfModel;
 

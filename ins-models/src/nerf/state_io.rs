@@ -100,7 +100,7 @@ pub fn decode(bytes: &[u8]) -> Result<(f32, Option<OccupancyGrid>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ins_core::render::geometry::Vec3;
+    use ins_scene::geometry::Vec3;
 
     #[test]
     fn round_trip_and_damage_is_an_error() {

@@ -6,18 +6,17 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use burn::prelude::*;
-use ins_core::data::{Scene, Split};
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{content_loss, mse, psnr, style_loss};
+use ins_core::loss::{PerceptualLoss, mse, patch_images, photo_patch, psnr};
 use ins_core::modules::field::Geometry;
 use ins_core::render::occupancy::OccupancyGrid;
-use ins_core::render::patches::{PatchSampler, PatchSpec};
-use ins_core::render::rays::RaySampler;
 use ins_core::train::{LossTerms, StepContext, Task};
+use ins_scene::data::{Scene, Split};
+use ins_scene::patches::{PatchSampler, PatchSpec};
+use ins_scene::rays::RaySampler;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
-use vgg_import::Vgg;
 
 use super::eval::{evaluate_views, save_eval_picture};
 use super::model::NerfModel;
@@ -58,16 +57,23 @@ pub enum Sampler {
 
 /// What stylization needs.
 pub struct Stylization {
-    /// Frozen VGG-16.
-    pub vgg: Vgg,
-    /// Gram targets per style layer, `[S, C, C]`.
-    pub targets: [Tensor<3>; 4],
-    /// One-hot codes, `[S, S]`.
-    pub codes: Tensor<2>,
+    /// VGG, the paintings' targets and the style codes.
+    pub perceptual: PerceptualLoss,
     /// The pretrained geometry, frozen: the teacher of the geometry loss.
     pub teacher: Geometry,
     /// Patch geometry.
     pub patch: PatchSpec,
+}
+
+/// The self-distilled geometry loss: mean |σ_student − σ_teacher| of the raw densities `[S, N]`
+/// the student gave at `points [N, 3]` under each style, the frozen teacher evaluated at the
+/// same points.
+pub fn geometry_loss(teacher: &Geometry, points: Tensor<2>, raw: Tensor<2>) -> Tensor<1> {
+    let (teacher_raw, _) = teacher.forward(points.detach());
+    let [s, n] = raw.dims();
+    (raw - teacher_raw.detach().reshape([1, n]).expand([s, n]))
+        .abs()
+        .mean()
 }
 
 /// Held-out evaluation during training.
@@ -232,39 +238,26 @@ impl NerfTask {
         let patch = sampler.sample(&self.scene, Split::Train)?;
         let k = spec.size as usize;
         let rays = RenderRays::from_batch(&self.scene, &patch.batch);
+        let perceptual = &style.perceptual;
         let out: Rendered = render(
             model,
             &rays,
             self.sampling(),
-            Some(style.codes.clone()),
+            Some(perceptual.codes.clone()),
             self.background,
             Some(seed),
             &self.device,
         );
         self.last_samples = out.samples;
         self.last_rays = k * k;
-        let n_styles = style.codes.dims()[0];
-        let images = out
-            .fine
-            .rgb
-            .reshape([n_styles, k, k, 3])
-            .permute([0, 3, 1, 2]);
-        let photo = Tensor::<1>::from_floats(patch.batch.rgb.as_flattened(), &self.device)
-            .reshape([1, k, k, 3])
-            .permute([0, 3, 1, 2]);
-        let content_target = style.vgg.features(photo).relu2_2.detach();
-        let feats = style.vgg.features(images);
-        let teacher_raw = {
-            let (raw, _) = style.teacher.forward(out.points.detach());
-            raw.detach()
-        };
-        let [s, n] = out.raw.dims();
-        let geometry = (out.raw - teacher_raw.reshape([1, n]).expand([s, n]))
-            .abs()
-            .mean();
+        let images = patch_images(out.fine.rgb, perceptual.n_styles(), k);
+        let photo = photo_patch(&patch.batch.rgb, k, &self.device);
+        let content_target = perceptual.content_target(photo);
+        let (style_term, content_term) = perceptual.terms(images, &content_target);
+        let geometry = geometry_loss(&style.teacher, out.points, out.raw);
         Ok(LossTerms::default()
-            .term("style", style_loss(&feats, &style.targets))
-            .term("content", content_loss(&feats, &content_target))
+            .term("style", style_term)
+            .term("content", content_term)
             .term("geometry", geometry)
             .metric(
                 "samples_per_ray",
@@ -304,11 +297,10 @@ impl NerfTask {
     }
 
     fn evaluate(&self, model: &NerfModel, step: usize) -> Result<Vec<(String, f64)>> {
-        let codes = self.style.as_ref().map(|s| s.codes.clone());
-        let n_styles = codes.as_ref().map_or(0, |c| c.dims()[0]);
+        let stylized = self.style.is_some();
         let model = model.valid();
         let device = self.device.clone().inner();
-        let first_code = codes.map(|c| c.slice([0..1]).inner().to_device(&device));
+        let first_code = self.style.as_ref().map(|s| s.perceptual.first_code());
         let views = evaluate_views(
             &model,
             &self.scene,
@@ -326,7 +318,7 @@ impl NerfTask {
         let mean = |f: fn(&super::eval::ViewEval) -> f64| {
             views.iter().map(f).sum::<f64>() / views.len().max(1) as f64
         };
-        if n_styles > 0 {
+        if stylized {
             return Ok(Vec::new());
         }
         Ok(vec![

@@ -72,7 +72,7 @@ fn bad_llff_inputs_are_errors_naming_the_file() {
     std::fs::write(&npy, &good[..good.len() - 40]).unwrap();
     assert_names(&load_err(d.path()), "poses_bounds.npy");
     // Wrong shape.
-    ins_core::data::npy::write_npy(&npy, &[3, 15], &[1.0; 45]).unwrap();
+    ins_scene::data::npy::write_npy(&npy, &[3, 15], &[1.0; 45]).unwrap();
     assert_names(&load_err(d.path()), "poses_bounds.npy");
     std::fs::write(&npy, &good).unwrap();
     // Counts that do not match.
@@ -116,14 +116,14 @@ fn bad_dtu_inputs_are_errors_naming_the_file() {
             ]
         })
         .collect();
-    ins_core::data::npy::write_npz(&npz, &two).unwrap();
+    ins_scene::data::npy::write_npz(&npz, &two).unwrap();
     assert_names(&load_err(d.path()), "cameras.npz");
     // A matrix of the wrong shape.
     let mut bad = two.clone();
     bad[0].1 = vec![2, 8];
     bad.push(("world_mat_2".into(), vec![4, 4], m.clone()));
     bad.push(("scale_mat_2".into(), vec![4, 4], m.clone()));
-    ins_core::data::npy::write_npz(&npz, &bad).unwrap();
+    ins_scene::data::npy::write_npz(&npz, &bad).unwrap();
     assert_names(&load_err(d.path()), "cameras.npz");
     std::fs::write(&npz, &good).unwrap();
     load(d.path());

@@ -161,7 +161,7 @@ fn rays_follow_each_formats_own_definition() {
     // x = (u+½−W/2)/f, y = (v+½−H/2)/f, in the source frame, then mapped to the scene frame.
     let (dir, _) = write(SceneFormat::Llff, 32, 3);
     let scene = load(dir.path());
-    let raw = ins_core::data::npy::read_npy(&dir.path().join("poses_bounds.npy")).unwrap();
+    let raw = ins_scene::data::npy::read_npy(&dir.path().join("poses_bounds.npy")).unwrap();
     for i in 0..3 {
         let m = |r: usize, c: usize| raw.at2(i, r * 5 + c) as f32;
         let (h, w, f) = (m(0, 4), m(1, 4), m(2, 4));
@@ -191,7 +191,7 @@ fn rays_follow_each_formats_own_definition() {
     // centres at integers): every point of the ray of pixel (u, v) projects to (u, v).
     let (dir, _) = write(SceneFormat::Dtu, 32, 2);
     let scene = load(dir.path());
-    let npz = ins_core::data::npy::read_npz(&dir.path().join("cameras.npz")).unwrap();
+    let npz = ins_scene::data::npy::read_npz(&dir.path().join("cameras.npz")).unwrap();
     for i in 0..2 {
         let wm = &npz[&format!("world_mat_{i}")];
         let sm = &npz[&format!("scale_mat_{i}")];

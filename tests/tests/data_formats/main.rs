@@ -8,16 +8,16 @@ mod rays_and_paths;
 
 use std::path::Path;
 
-use ins_core::data::check::check_scene;
-use ins_core::data::contact_sheet::contact_sheet;
-use ins_core::data::plain_image::{load_rgb, pixel_coordinates};
-use ins_core::data::synthetic::{self, SynthOptions, SynthScene};
-use ins_core::data::{LoadOptions, Scene, SceneFormat, Split};
-use ins_core::render::camera::Camera;
-use ins_core::render::geometry::{Vec3, orthonormality_error};
-use ins_core::render::patches::PatchSampler;
-use ins_core::render::paths::{average_pose, interpolate, spiral_for_scene, turntable_for_scene};
-use ins_core::render::rays::RaySampler;
+use ins_scene::camera::Camera;
+use ins_scene::data::check::check_scene;
+use ins_scene::data::contact_sheet::contact_sheet;
+use ins_scene::data::plain_image::{load_rgb, pixel_coordinates};
+use ins_scene::data::synthetic::{self, SynthOptions, SynthScene};
+use ins_scene::data::{LoadOptions, Scene, SceneFormat, Split};
+use ins_scene::geometry::{Vec3, orthonormality_error};
+use ins_scene::patches::PatchSampler;
+use ins_scene::paths::{average_pose, interpolate, spiral_for_scene, turntable_for_scene};
+use ins_scene::rays::RaySampler;
 
 fn write(format: SceneFormat, size: u32, views: usize) -> (tempfile::TempDir, SynthScene) {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -80,7 +80,7 @@ fn strided_patches_span_k_times_s_and_skip_background() {
 fn patches_can_be_required_to_lie_mostly_on_the_object() {
     let (dir, _) = write(SceneFormat::Blender, 48, 3);
     let scene = load(dir.path());
-    let coverage = |p: &ins_core::render::patches::Patch| {
+    let coverage = |p: &ins_scene::patches::Patch| {
         p.batch.mask.iter().filter(|&&m| m >= 0.5).count() as f32 / p.batch.len() as f32
     };
     let mut any = PatchSampler::new(4, 2, 3);

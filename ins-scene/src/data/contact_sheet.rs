@@ -5,8 +5,8 @@
 
 use super::images::Image;
 use super::scene::Scene;
-use crate::render::camera::Camera;
-use crate::render::geometry::{Bounds, Vec3};
+use crate::camera::Camera;
+use crate::geometry::{Bounds, Vec3};
 
 /// Draws up to `max_views` views (evenly spread over all views), each `thumb_width` pixels
 /// wide, in a near-square grid.

@@ -1,7 +1,7 @@
 //! The analytic scene: primitives with textures, ray-cast with exact depth, normals and masks.
 
-use crate::render::camera::Camera;
-use crate::render::geometry::{Similarity, Vec3};
+use crate::camera::Camera;
+use crate::geometry::{Similarity, Vec3};
 
 /// A primitive, in the scene's local frame.
 #[derive(Clone, Copy, Debug, PartialEq)]

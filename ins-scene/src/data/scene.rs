@@ -9,8 +9,8 @@ use serde::Serialize;
 
 use super::error::DataError;
 use super::images::{Image, Mask};
-use crate::render::camera::Camera;
-use crate::render::geometry::{Bounds, Similarity, Vec3};
+use crate::camera::Camera;
+use crate::geometry::{Bounds, Similarity, Vec3};
 
 /// The on-disk format a scene was read from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -139,7 +139,7 @@ impl LoadOptions {
     }
 }
 
-/// Posed images of one scene, in one camera convention (see [`crate::render::camera`]).
+/// Posed images of one scene, in one camera convention (see [`crate::camera`]).
 #[derive(Clone, Debug)]
 pub struct Scene {
     /// Folder name.

@@ -11,8 +11,8 @@ use serde_json::Value;
 use super::DataError;
 use super::images::{parallel_map, read_image};
 use super::scene::{LoadOptions, Scene, SceneFormat, Split, View};
-use crate::render::camera::Camera;
-use crate::render::geometry::{Bounds, Similarity};
+use crate::camera::Camera;
+use crate::geometry::{Bounds, Similarity};
 
 /// Near distance used for Blender scenes.
 pub const NEAR: f32 = 2.0;
@@ -148,8 +148,8 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         near: NEAR,
         far: FAR,
         bounds: Bounds::Aabb {
-            min: crate::render::geometry::Vec3::splat(-HALF_EXTENT),
-            max: crate::render::geometry::Vec3::splat(HALF_EXTENT),
+            min: crate::geometry::Vec3::splat(-HALF_EXTENT),
+            max: crate::geometry::Vec3::splat(HALF_EXTENT),
         },
         per_ray_range: false,
         to_scene: Similarity::identity(),

@@ -13,8 +13,8 @@ use super::DataError;
 use super::images::{list_images, parallel_map, read_image};
 use super::npy::read_npy;
 use super::scene::{LoadOptions, Scene, SceneFormat, View};
-use crate::render::camera::Camera;
-use crate::render::geometry::{Bounds, Similarity, Vec3};
+use crate::camera::Camera;
+use crate::geometry::{Bounds, Similarity, Vec3};
 use glam::DVec3;
 
 /// Reads an LLFF scene from `dir`.
@@ -156,7 +156,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     let bounds = frustum_bounds(&views);
     let to_scene = Similarity {
         scale: sc as f32,
-        rotation: crate::render::geometry::mat3_from_rows(rot_t.map(|r| r.map(|v| v as f32))),
+        rotation: crate::geometry::mat3_from_rows(rot_t.map(|r| r.map(|v| v as f32))),
         translation: Vec3::from_array(std::array::from_fn(|r| {
             -(0..3).map(|k| rot_t[r][k] * c[k]).sum::<f64>() as f32
         })),

@@ -6,12 +6,12 @@ use std::path::{Path, PathBuf};
 use serde_json::json;
 
 use super::analytic::{AnalyticScene, Rendering};
+use crate::camera::{Camera, flip_yz, pose_look_at};
 use crate::data::DataError;
 use crate::data::images::{to_u8, write_png};
 use crate::data::npy::{write_npy, write_npz};
 use crate::data::scene::{SceneFormat, Split};
-use crate::render::camera::{Camera, flip_yz, pose_look_at};
-use crate::render::geometry::{Mat3, Similarity, Vec3, mat3_rows};
+use crate::geometry::{Mat3, Similarity, Vec3, mat3_rows};
 
 /// Size and count of a generated scene.
 #[derive(Clone, Copy, Debug)]
@@ -204,7 +204,7 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
         let target_l = Vec3::new(0.05 * (i % 2) as f32, 0.0, -5.0);
         let pose_l = pose_look_at(eye_l, target_l, Vec3::new(0.0, 1.0, 0.0));
         let s = &scene.to_world;
-        let rot_l = crate::render::geometry::mat3_from_rows(pose_l.map(|r| [r[0], r[1], r[2]]));
+        let rot_l = crate::geometry::mat3_from_rows(pose_l.map(|r| [r[0], r[1], r[2]]));
         let rot_w = mat3_rows(s.rotation * rot_l);
         let eye_w = s.apply_point(eye_l);
         let c2w: [[f32; 4]; 3] =

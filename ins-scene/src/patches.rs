@@ -28,6 +28,25 @@ impl PatchSpec {
         Self { size, stride }
     }
 
+    /// The one stride rule of every variant: K rays per side, spaced so that the window spans
+    /// about `share` of the image's shorter side, `s = max(1, round(share · min(w, h) / K))`
+    /// (`stride`, when not 0, overrides it). The result is then [`PatchSpec::fitted`] to the
+    /// image, so a window that rounding made too wide loses rays, never the stride.
+    pub fn spanning(
+        size: u32,
+        stride: u32,
+        share: f32,
+        width: u32,
+        height: u32,
+    ) -> Result<PatchSpec, DataError> {
+        let stride = if stride > 0 {
+            stride
+        } else {
+            ((share * width.min(height) as f32 / size.max(1) as f32).round() as u32).max(1)
+        };
+        PatchSpec::new(size, stride).fitted(width, height)
+    }
+
     /// Window side K·s in pixels (saturating, so absurd requests cannot overflow).
     pub fn span(&self) -> u32 {
         self.size.saturating_mul(self.stride)
@@ -201,6 +220,33 @@ impl PatchSampler {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_stride_rule_spans_the_share_of_the_shorter_side_and_fits() {
+        // 0.6 of 200 px with 64 rays: 1.875 → 2.
+        assert_eq!(
+            PatchSpec::spanning(64, 0, 0.6, 200, 200).unwrap(),
+            PatchSpec::new(64, 2)
+        );
+        // 0.5 of 300 px: 2.34 → 2; an explicit stride wins.
+        assert_eq!(
+            PatchSpec::spanning(64, 0, 0.5, 400, 300).unwrap(),
+            PatchSpec::new(64, 2)
+        );
+        assert_eq!(
+            PatchSpec::spanning(64, 3, 0.5, 400, 300).unwrap(),
+            PatchSpec::new(64, 3)
+        );
+        // The whole of 192 px with 128 rays rounds to stride 2: the patch shrinks to 96 rays.
+        assert_eq!(
+            PatchSpec::spanning(128, 0, 1.0, 256, 192).unwrap(),
+            PatchSpec::new(96, 2)
+        );
+        assert_eq!(
+            PatchSpec::spanning(128, 0, 1.0, 256, 256).unwrap(),
+            PatchSpec::new(128, 2)
+        );
+    }
 
     #[test]
     fn fitting_shrinks_k_and_never_underflows() {

@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use super::scene::{Scene, SceneFormat, Split};
-use crate::render::geometry::{Bounds, Vec3, orthonormality_error};
+use crate::geometry::{Bounds, Vec3, orthonormality_error};
 
 /// What a scene holds.
 #[derive(Clone, Debug, Serialize)]

@@ -15,8 +15,8 @@ use super::DataError;
 use super::images::{list_images, parallel_map, read_image, read_mask};
 use super::npy::{Array, read_npz};
 use super::scene::{LoadOptions, Scene, SceneFormat, View};
-use crate::render::camera::Camera;
-use crate::render::geometry::{Bounds, Similarity, inverse3_f64};
+use crate::camera::Camera;
+use crate::geometry::{Bounds, Similarity, inverse3_f64};
 
 /// Intrinsics and pose recovered from a 3×4 projection matrix.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -294,7 +294,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         near: near.max(0.0),
         far,
         bounds: Bounds::Sphere {
-            center: crate::render::geometry::Vec3::ZERO,
+            center: crate::geometry::Vec3::ZERO,
             radius: 1.0,
         },
         per_ray_range: true,

@@ -1,0 +1,170 @@
+//! `ins-cli bench`: the fixed workloads of `docs/benchmarks.md`, one JSON line each.
+//!
+//! Every workload that trains is a step of a variant's own task and phase, taken by the
+//! trainer's [`ins_core::train::Stepper`] (the task's terms weighted by the phase, backward,
+//! Adam), on small synthetic inputs written for the occasion; `hash-grid` and `vgg-layers` time
+//! single operations.
+
+mod hash_grid;
+mod idr_pretrain;
+mod nerf_grid;
+mod nerf_pretrain;
+mod nerf_stylize;
+mod scenes;
+mod siren;
+mod vgg;
+mod vgg_layers;
+
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::prelude::*;
+use clap::Args;
+use ins_conv::Precision;
+use ins_core::train::{Phase, Stepper, Task};
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Workloads: vgg, vgg-layers (per-convolution profile), siren, nerf-pretrain, nerf-stylize,
+    /// nerf-grid, hash-grid, hash-grid-reference, idr-pretrain (default: vgg, siren,
+    /// nerf-pretrain, nerf-stylize, nerf-grid).
+    workloads: Vec<String>,
+    #[command(flatten)]
+    device: crate::common::DeviceArgs,
+    /// Timed steps (after one warm-up step); the median is reported.
+    #[arg(long, default_value_t = 5)]
+    steps: usize,
+    /// Arithmetic of the VGG convolutions: f32, or bf16 (AMX or AVX-512 BF16; f32 where the
+    /// CPU has neither). Default: bf16 where the CPU can, as in training.
+    #[arg(long)]
+    precision: Option<Precision>,
+}
+
+/// What a workload measured: milliseconds per timed step, and the rays (or points) of a step
+/// where it has them.
+pub struct Timing {
+    /// One entry per timed step.
+    pub times: Vec<f64>,
+    /// Rays or points per step.
+    pub rays: Option<f64>,
+}
+
+const KNOWN: &str = "vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, hash-grid, hash-grid-reference, idr-pretrain";
+
+pub fn run(args: BenchArgs) -> Result<()> {
+    let workloads = if args.workloads.is_empty() {
+        ["vgg", "siren", "nerf-pretrain", "nerf-stylize", "nerf-grid"]
+            .map(String::from)
+            .to_vec()
+    } else {
+        args.workloads.clone()
+    };
+    let backend = args.device.backend.resolve();
+    let precision = args.precision.unwrap_or(Precision::Bf16.effective());
+    for w in &workloads {
+        let device = backend.device().autodiff();
+        device.seed(42);
+        if w == "vgg-layers" {
+            vgg_layers::run(&device, &backend.to_string(), args.steps, precision)?;
+            continue;
+        }
+        let timing = match w.as_str() {
+            "vgg" => vgg::run(&device, args.steps, precision)?,
+            "siren" => siren::run(&device, args.steps, precision)?,
+            "nerf-pretrain" => nerf_pretrain::run(&device, args.steps)?,
+            "nerf-stylize" => nerf_stylize::run(&device, args.steps, precision)?,
+            "nerf-grid" => nerf_grid::run(&device, args.steps)?,
+            "hash-grid" => hash_grid::run(&device, args.steps, true)?,
+            "hash-grid-reference" => hash_grid::run(&device, args.steps, false)?,
+            "idr-pretrain" => idr_pretrain::run(&device, args.steps)?,
+            other => bail!("unknown workload {other:?} (known: {KNOWN})"),
+        };
+        let mut sorted = timing.times.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let median = sorted[sorted.len() / 2];
+        let mut line = serde_json::json!({
+            "workload": w,
+            "backend": backend.to_string(),
+            "ms_per_step": (median * 10.0).round() / 10.0,
+            "steps": sorted.len(),
+            "min_ms": (sorted[0] * 10.0).round() / 10.0,
+            "max_ms": (sorted[sorted.len() - 1] * 10.0).round() / 10.0,
+            "peak_rss_mb": peak_rss_mb(),
+        });
+        if matches!(w.as_str(), "vgg" | "siren" | "nerf-stylize") {
+            line["precision"] = precision.effective().to_string().into();
+        }
+        if let Some(rays) = timing.rays {
+            line["rays_per_s"] = ((rays / median * 1e3).round()).into();
+        }
+        println!("{line}");
+    }
+    Ok(())
+}
+
+/// Peak resident memory of this process (Linux), in MiB.
+fn peak_rss_mb() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some((kb / 1024.0).round())
+}
+
+/// Milliseconds of each of `steps` calls of `step`, after one warm-up call.
+pub fn timed(steps: usize, mut step: impl FnMut() -> Result<()>) -> Result<Vec<f64>> {
+    step()?;
+    let mut times = Vec::with_capacity(steps);
+    for _ in 0..steps.max(1) {
+        let t = Instant::now();
+        step()?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(times)
+}
+
+/// Reads one value of the model's first parameter, so an asynchronous backend has finished the
+/// update before the clock stops.
+fn sync<M: Module>(model: &M) {
+    struct First(bool);
+    impl ModuleVisitor for First {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if !self.0 {
+                self.0 = true;
+                let _ = param
+                    .val()
+                    .flatten::<1>(0, D - 1)
+                    .slice([0..1])
+                    .into_scalar::<f32>();
+            }
+        }
+    }
+    model.visit(&mut First(false));
+}
+
+/// Times `steps` training steps of `phase` on `task` from `model`, as the trainer takes them.
+/// `rays` reads a step's ray count from its metrics, where the workload reports one.
+pub fn time_task<T: Task>(
+    task: &mut T,
+    model: T::Model,
+    phase: Phase<T::Objective>,
+    steps: usize,
+    rays: Option<&str>,
+) -> Result<Timing> {
+    let terms = task.terms(phase.objective);
+    let (mut stepper, model) = Stepper::new(phase, model, terms)?;
+    let mut model = Some(model);
+    let mut counted = Vec::new();
+    let times = timed(steps, || {
+        let m = model.take().ok_or_else(|| anyhow::anyhow!("model"))?;
+        let (m, _, metrics) = stepper.step(task, m)?;
+        sync(&m);
+        if let Some(name) = rays {
+            counted.extend(metrics.iter().filter(|(n, _)| n == name).map(|(_, v)| *v));
+        }
+        model = Some(m);
+        Ok(())
+    })?;
+    let rays = (!counted.is_empty()).then(|| counted.iter().sum::<f64>() / counted.len() as f64);
+    Ok(Timing { times, rays })
+}

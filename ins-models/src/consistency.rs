@@ -1,0 +1,432 @@
+//! A stylized run evaluated along a camera path, whichever variant renders it (NeRF, IDR):
+//! view consistency (frames warped into their neighbours by the pretrained geometry), per view
+//! the Gram distance to the painting and the content distance to the pretrained render, and
+//! the depth kept from pretraining. Any set of frames of the same path (the stylized run, the
+//! pretrained run, a per-view 2D baseline) is scored on the same pixels.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use burn::prelude::*;
+use ins_core::eval::consistency::{PairScore, PathGeometry, mean_rmse};
+use ins_core::imaging::RgbImage;
+use ins_core::loss::{content_loss, style_loss};
+use ins_core::render::sphere_tracing::TraceOptions;
+use ins_core::train::RunFolder;
+use ins_scene::camera::Camera;
+use ins_scene::data::{Scene, SceneFormat};
+use ins_scene::geometry::Vec3;
+use ins_scene::paths::{spiral_for_scene, turntable_for_scene};
+use serde::Serialize;
+use vgg_import::Vgg;
+
+use crate::idr::IdrRun;
+use crate::nerf::NerfRun;
+use crate::run::{StyleArgs, Variant};
+
+/// The ranges scored: short (neighbouring frames) and long (seven frames apart).
+pub const RANGES: [usize; 2] = [1, 7];
+
+/// One rendered frame of a path, as the evaluation reads it.
+#[derive(Debug, Clone)]
+pub struct PathFrame {
+    /// The picture.
+    pub image: RgbImage,
+    /// The surface point each pixel sees, where it sees the object (NeRF: opacity above 0.5;
+    /// IDR: the ray meets the surface).
+    pub points: Vec<Option<Vec3>>,
+    /// The distance along each pixel's ray to that point.
+    pub depth: Vec<Option<f32>>,
+    /// The depth as a colour-mapped picture.
+    pub depth_picture: RgbImage,
+}
+
+impl PathFrame {
+    /// Pixels on the object.
+    pub fn object(&self) -> Vec<bool> {
+        self.points.iter().map(Option::is_some).collect()
+    }
+}
+
+/// A run that renders frames along a camera path: a NeRF or an IDR run.
+pub trait PathRender {
+    /// The run's scene.
+    fn scene(&self) -> &Scene;
+    /// Renders what `camera` sees under style `code` (`None`: unstylized).
+    fn frame(&self, camera: &Camera, code: Option<Tensor<2>>, device: &Device)
+    -> Result<PathFrame>;
+    /// The run's paintings and perceptual settings (empty for a pretrained run).
+    fn style(&self) -> &StyleArgs;
+    /// The pretrained run a stylized run started from.
+    fn base_run(&self) -> Option<&Path>;
+    /// A style code from mix weights (see `Run::code`).
+    fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>>;
+}
+
+impl PathRender for NerfRun {
+    fn scene(&self) -> &Scene {
+        &self.data.scene
+    }
+
+    fn frame(
+        &self,
+        camera: &Camera,
+        code: Option<Tensor<2>>,
+        device: &Device,
+    ) -> Result<PathFrame> {
+        let r = crate::nerf::eval::render_camera(
+            &self.model.valid(),
+            self.scene(),
+            camera,
+            self.sampling(),
+            code,
+            self.background(),
+            device,
+        )?;
+        let points = r.surface_points(self.scene(), camera);
+        let depth = (0..r.opacity.len())
+            .map(|i| (r.opacity[i] > 0.5).then(|| r.depth[i] / r.opacity[i]))
+            .collect();
+        Ok(PathFrame {
+            image: r.image(),
+            points,
+            depth,
+            depth_picture: r.depth_picture(),
+        })
+    }
+
+    fn style(&self) -> &StyleArgs {
+        &self.config.style
+    }
+
+    fn base_run(&self) -> Option<&Path> {
+        crate::nerf::Nerf::base_run(&self.config)
+    }
+
+    fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
+        crate::run::Run::code(self, mix, device)
+    }
+}
+
+impl PathRender for IdrRun {
+    fn scene(&self) -> &Scene {
+        &self.data
+    }
+
+    fn frame(
+        &self,
+        camera: &Camera,
+        code: Option<Tensor<2>>,
+        device: &Device,
+    ) -> Result<PathFrame> {
+        let r = crate::idr::eval::render_camera(
+            &self.model.valid(),
+            self.scene(),
+            camera,
+            code,
+            &TraceOptions::default(),
+            device,
+        )?;
+        let rays = ins_scene::rays::camera_rays(camera, |o, d| self.scene().ray_range(o, d));
+        let depth: Vec<Option<f32>> = (0..r.hit.len())
+            .map(|i| r.hit[i].then(|| r.depth[i]))
+            .collect();
+        let points = depth
+            .iter()
+            .enumerate()
+            .map(|(i, t)| t.map(|t| rays.point(i, t)))
+            .collect();
+        let opacity: Vec<f32> = r.hit.iter().map(|&h| if h { 1.0 } else { 0.0 }).collect();
+        let (lo, hi) = depth
+            .iter()
+            .flatten()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &d| {
+                (lo.min(d), hi.max(d))
+            });
+        let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+        let depth_picture = ins_core::imaging::depth_image(
+            &r.depth
+                .iter()
+                .zip(&r.hit)
+                .map(|(d, h)| if *h { *d } else { 0.0 })
+                .collect::<Vec<_>>(),
+            &opacity,
+            r.width,
+            r.height,
+            lo,
+            hi,
+        );
+        Ok(PathFrame {
+            image: r.image(),
+            points,
+            depth,
+            depth_picture,
+        })
+    }
+
+    fn style(&self) -> &StyleArgs {
+        &self.config.style
+    }
+
+    fn base_run(&self) -> Option<&Path> {
+        crate::idr::Idr::base_run(&self.config)
+    }
+
+    fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
+        crate::run::Run::code(self, mix, device)
+    }
+}
+
+/// A stylized run folder and its pretrained run, of either variant.
+pub struct StylizedPair {
+    /// The stylized run.
+    pub student: Box<dyn PathRender>,
+    /// The pretrained run it started from.
+    pub teacher: Box<dyn PathRender>,
+}
+
+impl StylizedPair {
+    /// Loads the stylized run `dir` (NeRF or IDR, told apart by its config) and its base.
+    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
+        let config = RunFolder::new(dir).config();
+        let student: Box<dyn PathRender> = if crate::nerf::NerfRunConfig::from_file(&config).is_ok()
+        {
+            Box::new(NerfRun::load(dir, device)?)
+        } else if crate::idr::IdrRunConfig::from_file(&config).is_ok() {
+            Box::new(IdrRun::load(dir, device)?)
+        } else {
+            // Names the problem (no config, or a SIREN run) through the NeRF loader.
+            Box::new(NerfRun::load(dir, device)?)
+        };
+        let Some(from) = student.base_run().map(Path::to_path_buf) else {
+            bail!(
+                "{} is a pretrained run: view consistency is measured on a stylized run \
+                 (`ins-cli train nerf|idr --from {} --style PAINTING`)",
+                dir.display(),
+                dir.display()
+            );
+        };
+        let teacher: Box<dyn PathRender> =
+            if crate::nerf::NerfRunConfig::from_file(&RunFolder::new(&from).config()).is_ok() {
+                Box::new(NerfRun::load(&from, device)?)
+            } else {
+                Box::new(IdrRun::load(&from, device)?)
+            };
+        let _ = teacher.scene();
+        Ok(Self { student, teacher })
+    }
+
+    /// The default path: the spiral for forward-facing scenes, a turntable for the others.
+    pub fn default_path(&self) -> &'static str {
+        match self.student.scene().format {
+            SceneFormat::Llff => "spiral",
+            _ => "turntable",
+        }
+    }
+
+    /// The cameras of a `kind` path (default: [`StylizedPair::default_path`]) of `frames`.
+    pub fn cameras(&self, kind: Option<&str>, frames: usize) -> Result<Vec<Camera>> {
+        let scene = self.student.scene();
+        match kind.unwrap_or(self.default_path()) {
+            "spiral" => spiral_for_scene(scene, frames),
+            "turntable" => turntable_for_scene(scene, frames),
+            other => bail!("unknown --path {other:?} (expected spiral or turntable)"),
+        }
+        .context("the scene has no cameras to build a path from")
+    }
+}
+
+/// A path rendered by the pretrained model (the geometry) and by the stylized one.
+pub struct PathRenders {
+    /// One camera per frame.
+    pub cameras: Vec<Camera>,
+    /// Unstylized frames of the pretrained (teacher) run.
+    pub pretrained: Vec<PathFrame>,
+    /// Frames of the stylized run.
+    pub stylized: Vec<PathFrame>,
+}
+
+impl PathRenders {
+    /// Renders `cameras` with the pair's teacher (unstylized) and student (under `code`),
+    /// calling `progress(done)` after each frame.
+    pub fn render(
+        pair: &StylizedPair,
+        cameras: Vec<Camera>,
+        code: Option<Tensor<2>>,
+        device: &Device,
+        mut progress: impl FnMut(usize),
+    ) -> Result<Self> {
+        let mut pretrained = Vec::with_capacity(cameras.len());
+        let mut stylized = Vec::with_capacity(cameras.len());
+        for (i, cam) in cameras.iter().enumerate() {
+            pretrained.push(pair.teacher.frame(cam, None, device)?);
+            stylized.push(pair.student.frame(cam, code.clone(), device)?);
+            progress(i + 1);
+        }
+        Ok(Self {
+            cameras,
+            pretrained,
+            stylized,
+        })
+    }
+
+    /// The path's geometry: the pretrained model's surface points.
+    pub fn geometry(&self) -> PathGeometry {
+        PathGeometry {
+            cameras: self.cameras.clone(),
+            points: self.pretrained.iter().map(|f| f.points.clone()).collect(),
+        }
+    }
+
+    /// Median relative depth error of the stylized frames against the pretrained ones on
+    /// pixels on the object in both (mean over frames), and the fraction of pixels that are on
+    /// the object in both or in neither.
+    pub fn depth_agreement(&self) -> (f64, f64) {
+        let n = self.cameras.len().max(1) as f64;
+        let (mut err, mut agree) = (0.0, 0.0);
+        for (s, t) in self.stylized.iter().zip(&self.pretrained) {
+            let (e, a) = depth_agreement(s, t);
+            err += e;
+            agree += a;
+        }
+        (err / n, agree / n)
+    }
+}
+
+/// The median relative depth difference of two frames of one camera on pixels on the object in
+/// both, and the fraction of pixels where they agree on the object.
+pub fn depth_agreement(student: &PathFrame, teacher: &PathFrame) -> (f64, f64) {
+    let mut errors = Vec::new();
+    let mut agree = 0usize;
+    for (s, t) in student.depth.iter().zip(&teacher.depth) {
+        if s.is_some() == t.is_some() {
+            agree += 1;
+        }
+        if let (Some(s), Some(t)) = (s, t) {
+            errors.push(((s - t).abs() / t.abs().max(1e-6)) as f64);
+        }
+    }
+    errors.sort_by(f64::total_cmp);
+    let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
+    (median, agree as f64 / student.depth.len().max(1) as f64)
+}
+
+/// How one set of frames scores.
+#[derive(Debug, Clone, Serialize)]
+pub struct SetScores {
+    /// `stylized`, `baseline2d` or `pretrained`.
+    pub set: String,
+    /// Per range in [`RANGES`]: the mean masked RMSE.
+    pub rmse: Vec<Option<f64>>,
+    /// Per range: every pair.
+    #[serde(skip)]
+    pub pairs: Vec<Vec<PairScore>>,
+    /// Per view: Gram distance to the painting (relu1_2…relu4_3, the training loss).
+    pub gram_distance: Vec<f64>,
+    /// Per view: relu2_2 content distance to the pretrained render of the view.
+    pub content_distance: Vec<f64>,
+}
+
+impl SetScores {
+    /// Mean Gram distance over the views.
+    pub fn mean_gram(&self) -> f64 {
+        mean(&self.gram_distance)
+    }
+
+    /// Mean content distance over the views.
+    pub fn mean_content(&self) -> f64 {
+        mean(&self.content_distance)
+    }
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// The relu2_2 features of `frames`: the content reference of every set scored against them.
+pub fn content_features(vgg: &Vgg, frames: &[RgbImage], device: &Device) -> Vec<Tensor<4>> {
+    frames
+        .iter()
+        .map(|f| vgg.features(f.to_tensor(device)).relu2_2)
+        .collect()
+}
+
+/// Scores `frames` of the path: consistency at every range, and per view the style and
+/// content distances (`style` the painting's Gram targets, `reference` the pretrained frames'
+/// relu2_2 features), one VGG pass per frame.
+pub fn score_frames(
+    set: &str,
+    geometry: &PathGeometry,
+    frames: &[RgbImage],
+    reference: &[Tensor<4>],
+    vgg: &Vgg,
+    style: &[Tensor<3>; 4],
+    device: &Device,
+) -> SetScores {
+    let data: Vec<&[f32]> = frames.iter().map(|f| f.data.as_slice()).collect();
+    let pairs: Vec<Vec<PairScore>> = RANGES
+        .iter()
+        .map(|&k| geometry.pair_scores(&data, k))
+        .collect();
+    let mut gram = Vec::with_capacity(frames.len());
+    let mut content = Vec::with_capacity(frames.len());
+    for (f, r) in frames.iter().zip(reference) {
+        let feats = vgg.features(f.to_tensor(device));
+        gram.push(style_loss(&feats, style).into_scalar::<f32>() as f64);
+        content.push(content_loss(&feats, r).into_scalar::<f32>() as f64);
+    }
+    SetScores {
+        set: set.to_string(),
+        rmse: pairs.iter().map(|p| mean_rmse(p)).collect(),
+        pairs,
+        gram_distance: gram,
+        content_distance: content,
+    }
+}
+
+/// Indices of the VGG layers (relu1_2, relu2_2) whose nearest-neighbour distance to a painting
+/// mostly reads its colours: the palette.
+pub const PALETTE_LAYERS: [usize; 2] = [0, 1];
+/// Indices of the layers (relu3_3, relu4_3) that read its strokes: the texture.
+pub const TEXTURE_LAYERS: [usize; 2] = [2, 3];
+
+/// A painting's features as the texture measure reads them: per layer, a regular subsample of
+/// its positions, as unit columns.
+pub struct PaintingFeatures(pub [Tensor<2>; 4]);
+
+impl PaintingFeatures {
+    /// The features of `painting`, fitted within `size` pixels as in training.
+    pub fn new(vgg: &Vgg, painting: &RgbImage, size: usize, device: &Device) -> Self {
+        let f = vgg.features(painting.fit_within(size).to_tensor(device));
+        Self(std::array::from_fn(|l| {
+            ins_core::eval::feature_match::painting_positions(f.style_layers()[l].clone())
+        }))
+    }
+}
+
+/// Per VGG layer, the mean over `frames` of the nearest-neighbour feature distance to the
+/// painting on the pixels `masks` marks (the object): 1 − the best cosine similarity of each
+/// object position to any position of the painting.
+pub fn texture_distances(
+    vgg: &Vgg,
+    painting: &PaintingFeatures,
+    frames: &[RgbImage],
+    masks: &[Vec<bool>],
+    device: &Device,
+) -> [f64; 4] {
+    use ins_core::eval::feature_match::{mask_at_layer, nn_distance, positions};
+    let mut sums = [0.0f64; 4];
+    let mut counts = [0usize; 4];
+    for (frame, mask) in frames.iter().zip(masks) {
+        let feats = vgg.features(frame.to_tensor(device));
+        for (l, f) in feats.style_layers().into_iter().enumerate() {
+            let [_, _, lh, lw] = f.dims();
+            let keep = mask_at_layer(mask, frame.width, frame.height, lw, lh);
+            if let Some(p) = positions(f.clone(), &keep) {
+                sums[l] += nn_distance(p, painting.0[l].clone());
+                counts[l] += 1;
+            }
+        }
+    }
+    std::array::from_fn(|l| sums[l] / counts[l].max(1) as f64)
+}

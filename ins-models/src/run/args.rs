@@ -1,0 +1,174 @@
+//! The argument groups every variant's configuration is made of. Each group is both clap flags
+//! (flattened into `ins-cli train <variant>`) and JSON fields (flattened into the run's
+//! `config.json`, so a run folder's config stays one flat object).
+//!
+//! A value of 0 in a numeric field means "the variant's default" where the doc says so; the
+//! run resolves it before writing `config.json`, which therefore holds the values that ran.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use ins_core::loss::StyleLoss;
+use ins_core::modules::style_position::StylePositionConfig;
+use serde::{Deserialize, Serialize};
+
+/// Whether a run pretrains on a scene or stylizes a pretrained run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunKind {
+    /// `--scene`: learn the scene (and, for SIREN, stylize it in the same run).
+    Pretrain,
+    /// `--from RUN --style IMG`: stylize a pretrained run.
+    Stylize,
+}
+
+/// Where a scene run starts: a scene folder to pretrain on, or a pretrained run to stylize.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
+#[serde(default)]
+pub struct SourceArgs {
+    /// Scene folder to pretrain on (NeRF: Blender, LLFF or DTU; IDR: DTU/IDR with masks).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Pretrained run to stylize (its scene, model and scene settings are reused).
+    #[arg(long)]
+    pub from: Option<PathBuf>,
+    /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
+    #[arg(long, default_value_t = 0)]
+    pub downscale: u32,
+}
+
+impl Default for SourceArgs {
+    fn default() -> Self {
+        crate::config::clap_defaults()
+    }
+}
+
+impl SourceArgs {
+    /// Which kind of run `self` and `styles` describe; an error when both or neither of
+    /// `--scene` and `--from` are given, or styles come without `--from`. `what` names the
+    /// variant's subject in the messages ("a NeRF", "a surface").
+    pub fn kind(&self, styles: &[PathBuf], what: &str) -> Result<RunKind> {
+        match (&self.scene, &self.from) {
+            (Some(_), None) if styles.is_empty() => Ok(RunKind::Pretrain),
+            (Some(_), None) => bail!(
+                "--style needs --from RUN (stylize a pretrained run); pretrain with --scene first"
+            ),
+            (None, Some(_)) if !styles.is_empty() => Ok(RunKind::Stylize),
+            (None, Some(_)) => bail!("stylizing (--from) needs at least one --style image"),
+            (Some(_), Some(_)) => {
+                bail!("give either --scene (pretrain) or --from (stylize), not both")
+            }
+            (None, None) => bail!(
+                "give --scene DIR to pretrain {what}, or --from RUN --style IMG to stylize one"
+            ),
+        }
+    }
+}
+
+/// How long and how fast a scene run trains, and how it is seeded and checkpointed.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
+#[serde(default)]
+pub struct ScheduleArgs {
+    /// Training steps (0: the variant's default; NeRF with the grid 1000 pretraining, 4000 on
+    /// forward-facing LLFF scenes, 600 stylizing, with the mlp 200000 / 50000; IDR 12000 /
+    /// 400).
+    #[arg(long, default_value_t = 0)]
+    pub steps: usize,
+    /// Adam learning rate (0: the variant's default; NeRF grid 1e-2 pretraining, 1e-3
+    /// stylizing, mlp 5e-4 / 1e-4; IDR grid 5e-3 / 5e-3, mlp 1e-4 / 1e-3).
+    #[arg(long, default_value_t = 0.0)]
+    pub lr: f64,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Steps between checkpoints.
+    #[arg(long, default_value_t = 500)]
+    pub checkpoint_every: usize,
+}
+
+impl Default for ScheduleArgs {
+    fn default() -> Self {
+        crate::config::clap_defaults()
+    }
+}
+
+/// The paintings and the perceptual loss on strided patches: what stylization needs.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
+#[serde(default)]
+pub struct StyleArgs {
+    /// Style image; repeat for a conditional multi-style model (one-hot codes in this order).
+    #[arg(long = "style")]
+    pub styles: Vec<PathBuf>,
+    /// Longer side of the style images for their Gram targets (0: 128 for SIREN, 256 for NeRF
+    /// and IDR).
+    #[arg(long, default_value_t = 0)]
+    pub style_size: usize,
+    /// How the paintings' style is matched: gram (Gatys' Gram matrices, the paper's), nnfm
+    /// (ARF's nearest-neighbour feature matching) or mean-std (AdaIN's channel statistics).
+    #[arg(long, default_value = "gram")]
+    #[serde(default)]
+    pub style_loss: StyleLoss,
+    /// Style loss weight (default: per style loss and VGG preprocessing).
+    #[arg(long)]
+    pub style_weight: Option<f64>,
+    /// Content loss weight (default: per VGG preprocessing).
+    #[arg(long)]
+    pub content_weight: Option<f64>,
+    /// Rays (or pixels) per side of a stylization patch (0: 128 for SIREN, 64 for NeRF and IDR).
+    #[arg(long, default_value_t = 0)]
+    pub patch: usize,
+    /// Pixels between patch rays (0: the variant's rule, see `PatchSpec::spanning`).
+    #[arg(long, default_value_t = 0)]
+    pub stride: usize,
+}
+
+impl Default for StyleArgs {
+    fn default() -> Self {
+        crate::config::clap_defaults()
+    }
+}
+
+impl StyleArgs {
+    /// Fills the fields left at 0 with a variant's defaults.
+    pub fn resolve(&mut self, patch: usize, style_size: usize) {
+        if self.patch == 0 {
+            self.patch = patch;
+        }
+        if self.style_size == 0 {
+            self.style_size = style_size;
+        }
+    }
+}
+
+/// The size of the SIM a scene run adds when it stylizes.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
+#[serde(default)]
+pub struct StylizerArgs {
+    /// Stylization: SIM width (0: the variant's default; NeRF 64 with the grid, 256 with the
+    /// mlp; IDR 64).
+    #[arg(long, default_value_t = 0)]
+    pub sim_width: usize,
+    /// Stylization: octaves of the position encoding fed to the SIM.
+    #[arg(long, default_value_t = 4)]
+    pub position_freqs: usize,
+    /// Stylization: finest resolution of the SIM's own texture hash grid over the scene's box
+    /// (0: none, the SIM sees only the octaves). A run folder written before it existed has
+    /// none.
+    #[arg(long, default_value_t = 0)]
+    #[serde(default)]
+    pub sim_grid: u32,
+}
+
+impl StylizerArgs {
+    /// How the SIM sees positions.
+    pub fn position(&self) -> StylePositionConfig {
+        StylePositionConfig::new()
+            .with_position_freqs(self.position_freqs)
+            .with_grid_resolution(self.sim_grid)
+    }
+}
+
+impl Default for StylizerArgs {
+    fn default() -> Self {
+        crate::config::clap_defaults()
+    }
+}

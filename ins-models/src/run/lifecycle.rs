@@ -1,0 +1,194 @@
+//! A run's life, once for every variant: [`train`] pretrains on a scene or stylizes a
+//! pretrained run into a locked run folder, and [`Run::load`] loads a run folder back.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use burn::prelude::*;
+use ins_core::imaging::RgbImage;
+use ins_core::loss::{LossWeights, PerceptualLoss};
+use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
+use ins_core::train::{RunFolder, TrainError, TrainOptions, TrainOutcome, Trainer};
+use vgg_import::{Preprocess, Vgg};
+
+use super::args::RunKind;
+use super::variant::{Start, Variant};
+
+/// Trains a run of variant `V` into `opts.out_dir`: pretraining (`--scene`, or SIREN's image),
+/// or stylizing the pretrained run the config names (`--from`). `vgg` is needed where the run
+/// stylizes.
+///
+/// Every input (data, base run, paintings) is read before the folder is touched, so bad input
+/// leaves nothing behind; then the folder is locked (a second run given the same folder is
+/// refused), a folder that already holds a run is refused unless resuming, and only then is
+/// `config.json` written.
+pub fn train<V: Variant>(
+    cfg: &V::Config,
+    vgg: Option<Vgg>,
+    device: &Device,
+    opts: TrainOptions,
+) -> Result<TrainOutcome<V::Model>> {
+    let kind = V::kind(cfg)?;
+    let mut cfg = cfg.clone();
+    let start = match kind {
+        RunKind::Pretrain => {
+            let data = V::load_data(&mut cfg)?;
+            V::resolve(&mut cfg, kind, &data);
+            Start::Fresh(data)
+        }
+        RunKind::Stylize => {
+            let from = V::base_run(&cfg)
+                .context("stylizing needs --from RUN")?
+                .to_path_buf();
+            let base = Run::<V>::load(&from, device)?;
+            if base.base.is_some() {
+                bail!(
+                    "{} is already a stylized run; stylize its pretrained run ({}) instead",
+                    from.display(),
+                    V::base_run(&base.config).map_or("?".into(), |p| p.display().to_string())
+                );
+            }
+            V::inherit(&mut cfg, &base.config, &from)?;
+            V::resolve(&mut cfg, kind, &base.data);
+            Start::From(base)
+        }
+    };
+    let styles = load_styles(&V::style(&cfg).styles)?;
+
+    let folder = RunFolder::new(&opts.out_dir);
+    let _lock = folder.lock()?;
+    if !opts.resume && folder.checkpoints().is_started() {
+        return Err(TrainError::RunExists {
+            dir: folder.dir().to_path_buf(),
+        }
+        .into());
+    }
+    crate::config::write_run_config(&cfg, folder.dir(), opts.resume)?;
+
+    let ad = device.clone().autodiff();
+    let seed = V::seed(&cfg);
+    let model = match &start {
+        Start::Fresh(data) => {
+            ins_core::train::seeding::seeded(&ad, seed, || V::new_model(&cfg, data, &ad))
+        }
+        Start::From(base) => ins_core::train::seeding::seeded(&ad, seed, || {
+            V::add_stylizer(base.model.clone().to_device(&ad), &cfg, styles.len(), &ad)
+        }),
+    };
+    let (style, preprocess) = if styles.is_empty() {
+        (None, Preprocess::Caffe)
+    } else {
+        let vgg = vgg.context("stylizing needs VGG-16")?.to_device(&ad);
+        let preprocess = vgg.preprocess;
+        let s = V::style(&cfg);
+        let loss = PerceptualLoss::new(vgg, &styles, s.style_size, s.style_loss, &ad);
+        (Some(loss), preprocess)
+    };
+    let s = V::style(&cfg);
+    let weights =
+        LossWeights::or_defaults(preprocess, s.style_loss, s.content_weight, s.style_weight);
+    let mut task = V::task(&cfg, start, style, &folder, &ad)?;
+    let phases = V::phases(&cfg, kind, weights);
+    let outcome = Trainer::new(phases, opts).run(&mut task, model)?;
+    if outcome.finished {
+        V::final_report(&outcome.model, &task, &cfg, &folder, device)?;
+    }
+    Ok(outcome)
+}
+
+/// The paintings, each read now so a missing or damaged one stops the run before it starts.
+fn load_styles(paths: &[PathBuf]) -> Result<Vec<RgbImage>> {
+    paths.iter().map(|p| RgbImage::load(p)).collect()
+}
+
+/// "an" before a name read with a vowel first (IDR), "a" otherwise (NeRF, SIREN).
+fn article(name: &str) -> &'static str {
+    if name.starts_with(['A', 'E', 'I', 'O', 'U']) {
+        "an"
+    } else {
+        "a"
+    }
+}
+
+/// A run folder loaded back: its configuration, data, model and extra state.
+pub struct Run<V: Variant> {
+    /// The run folder.
+    pub dir: PathBuf,
+    /// Its configuration.
+    pub config: V::Config,
+    /// The pretrained run's configuration, for a stylized run.
+    pub base: Option<V::Config>,
+    /// The data at the run's resolution.
+    pub data: V::Data,
+    /// The model of the newest checkpoint.
+    pub model: V::Model,
+    /// What the checkpoint keeps beside the model.
+    pub extra: V::Extra,
+}
+
+impl<V: Variant> Run<V> {
+    /// Loads `dir` (a folder written by `train`) on `device`.
+    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
+        let folder = RunFolder::new(dir);
+        let config_path = folder.config();
+        if !config_path.is_file() {
+            bail!(
+                "{} is not {} {} run folder (no config.json)",
+                dir.display(),
+                article(V::NAME),
+                V::NAME
+            );
+        }
+        let config: V::Config = crate::config::read_json(&config_path).with_context(|| {
+            format!(
+                "{} is not {} {} run",
+                dir.display(),
+                article(V::NAME),
+                V::NAME
+            )
+        })?;
+        let base: Option<V::Config> = match V::kind(&config)? {
+            RunKind::Pretrain => None,
+            RunKind::Stylize => {
+                let from = V::base_run(&config).context("a stylized run without --from")?;
+                Some(
+                    crate::config::read_json(&RunFolder::new(from).config())
+                        .with_context(|| format!("the base run of {}", dir.display()))?,
+                )
+            }
+        };
+        let mut scene_cfg = base.clone().unwrap_or_else(|| config.clone());
+        let data = V::load_data(&mut scene_cfg)?;
+        let latest = folder
+            .checkpoints()
+            .latest_dir()?
+            .with_context(|| format!("{}: no checkpoint in the run folder", dir.display()))?;
+        let ckpt = CheckpointStore::load_dir(&latest)?;
+        let mut model = V::new_model(&scene_cfg, &data, device);
+        if base.is_some() {
+            model = V::add_stylizer(model, &config, V::style(&config).styles.len(), device);
+        }
+        let model = load_module_bytes(model, ckpt.model, &CheckpointStore::model_file(&latest))?;
+        let extra = V::decode_extra(ckpt.task.as_deref(), &CheckpointStore::task_file(&latest))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            config,
+            base,
+            data,
+            model,
+            extra,
+        })
+    }
+
+    /// The configuration that defines the data and the content module: the base run's for a
+    /// stylized run.
+    pub fn scene_config(&self) -> &V::Config {
+        self.base.as_ref().unwrap_or(&self.config)
+    }
+
+    /// A style code `[1, n]` from mix weights (normalised; default: the first style), or `None`
+    /// for an unstylized run (where a mix is an error naming the run).
+    pub fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
+        crate::style_mix::code(V::n_styles(&self.model), mix, &self.dir, device)
+    }
+}
