@@ -199,7 +199,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
     // Gatys' per-view method matches Gram matrices; the run's weights carry over where the run
     // did too.
     let gatys_weights = {
-        let (cw, sw) = match style_args.style_loss {
+        let (cw, sw) = match style_args.loss() {
             StyleLoss::Gram => (style_args.content_weight, style_args.style_weight),
             _ => (None, None),
         };
@@ -211,6 +211,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
             lr,
             weights: gatys_weights,
             style_size: style_args.style_size,
+            style_loss: StyleLoss::Gram,
         };
         let names = frame_names(pretrained.len());
         let paths: Vec<PathBuf> = inputs

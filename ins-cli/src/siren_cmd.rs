@@ -49,15 +49,15 @@ pub struct RenderSiren {
     device: DeviceArgs,
 }
 
-/// Writes a generated demo input once (atomically, so a killed run never leaves half of one).
+/// Writes a built-in demo input once (atomically, so a killed run never leaves half of one).
 fn demo_input(
     dir: &Path,
     name: &str,
-    make: fn(usize) -> ins_core::imaging::RgbImage,
+    make: impl FnOnce() -> ins_core::imaging::RgbImage,
 ) -> Result<PathBuf> {
     let p = dir.join(name);
     if !p.exists() {
-        make(256).save(&p)?;
+        make().save(&p)?;
     }
     Ok(p)
 }
@@ -66,17 +66,15 @@ pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
     let mut cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
     let inputs = a.out.join("inputs");
     if cfg.content.is_none() {
-        cfg.content = Some(demo_input(
-            &inputs,
-            "demo_content.png",
-            ins_models::demo::demo_content,
-        )?);
+        cfg.content = Some(demo_input(&inputs, "demo_content.png", || {
+            ins_models::demo::demo_content(256)
+        })?);
     }
     if cfg.style.styles.is_empty() {
         cfg.style.styles = vec![demo_input(
             &inputs,
-            "demo_style.png",
-            ins_models::demo::demo_style,
+            "bridgewater_madonna.png",
+            ins_models::demo::demo_painting,
         )?];
     }
     if let Some(n) = a.steps {

@@ -38,9 +38,13 @@ pub struct Stylize2d {
     /// own size).
     #[arg(long, default_value_t = 256)]
     size: usize,
-    /// Longer side of the painting for its Gram targets.
+    /// Longer side of the painting for its style targets.
     #[arg(long, default_value_t = 256)]
     style_size: usize,
+    /// How the painting's style is matched: gram (Gatys), nnfm (ARF's nearest-neighbour
+    /// feature matching) or mean-std.
+    #[arg(long, default_value = "gram")]
+    style_loss: ins_core::loss::StyleLoss,
     /// Adam learning rate in pixel units.
     #[arg(long, default_value_t = 0.02)]
     lr: f64,
@@ -69,11 +73,12 @@ impl Stylize2d {
             lr: self.lr,
             weights: LossWeights::or_defaults(
                 vgg.preprocess,
-                ins_core::loss::StyleLoss::Gram,
+                self.style_loss,
                 self.content_weight,
                 self.style_weight,
             ),
             style_size: self.style_size,
+            style_loss: self.style_loss,
         }
     }
 
@@ -192,7 +197,7 @@ pub fn stylize_frames(
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out_dir).map_err(|e| anyhow::anyhow!("{}: {e}", out_dir.display()))?;
     let mut written = Vec::with_capacity(frames.len());
-    let perceptual = painting_loss(run.vgg, run.style, run.settings.style_size, run.device);
+    let perceptual = painting_loss(run.vgg, run.style, run.settings, run.device);
     for (i, frame) in frames.iter().enumerate() {
         let name = frame.file_stem().unwrap_or_default().to_string_lossy();
         let out = out_dir.join(format!("{name}.png"));

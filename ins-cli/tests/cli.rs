@@ -40,7 +40,7 @@ fn quick_run_on_the_builtin_input_then_render_any_size_and_mix() {
         "metrics.jsonl",
         "config.json",
         "inputs/demo_content.png",
-        "inputs/demo_style.png",
+        "inputs/bridgewater_madonna.png",
     ] {
         assert!(run.join(f).exists(), "missing {f}");
     }

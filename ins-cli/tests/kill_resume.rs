@@ -161,7 +161,7 @@ fn killed_runs_resume_to_the_same_parameters_as_an_uninterrupted_one() {
     let b: PathBuf = dir.path().join("killed");
     // The demo inputs the first run generated; the killed run must train on the same ones.
     std::fs::create_dir_all(b.join("inputs")).unwrap();
-    for f in ["demo_content.png", "demo_style.png"] {
+    for f in ["demo_content.png", "bridgewater_madonna.png"] {
         std::fs::copy(a.join("inputs").join(f), b.join("inputs").join(f)).unwrap();
     }
     let mut rng = SmallRng::seed_from_u64(11);

@@ -1,5 +1,7 @@
-//! Built-in demo inputs, generated so that a first run needs no files: a small shaded scene
-//! (content) and a swirling brush-stroke "painting" (style).
+//! Built-in demo inputs, so that a first run needs no files: a small shaded scene (content,
+//! generated) and a real painting shipped small in the binary, Raphael's *Bridgewater Madonna*
+//! (public domain; `assets/README.md`). A generated brush-stroke image ([`demo_style`]) is the
+//! tests' synthetic style.
 
 use ins_core::imaging::RgbImage;
 
@@ -93,8 +95,22 @@ pub fn demo_content(size: usize) -> RgbImage {
     }
 }
 
-/// A `size`×`size` style image: short brush strokes following a swirling flow, in a night-sky
-/// palette of blues and yellows.
+/// The demo's painting: Raphael, *The Bridgewater Madonna* (c. 1507), 192×284.
+pub fn demo_painting() -> RgbImage {
+    static JPEG: &[u8] = include_bytes!("../assets/bridgewater_madonna.jpg");
+    // The file is part of the binary; failing to decode it is a build defect.
+    let img = image::load_from_memory(JPEG)
+        .unwrap_or_else(|e| panic!("the embedded demo painting does not decode: {e}"))
+        .to_rgb8();
+    RgbImage {
+        width: img.width() as usize,
+        height: img.height() as usize,
+        data: img.as_raw().iter().map(|&v| v as f32 / 255.0).collect(),
+    }
+}
+
+/// A `size`×`size` synthetic style image: short brush strokes following a swirling flow, in a
+/// night-sky palette of blues and yellows.
 pub fn demo_style(size: usize) -> RgbImage {
     let palette = [
         [0.05f32, 0.1, 0.3],
@@ -137,4 +153,14 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
 fn normalize(a: [f32; 3]) -> [f32; 3] {
     let n = dot(a, a).sqrt().max(1e-12);
     a.map(|v| v / n)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_demo_painting_decodes_at_its_size() {
+        let p = super::demo_painting();
+        assert_eq!((p.width, p.height), (192, 284));
+        assert!(p.data.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
 }

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{LossWeights, PerceptualLoss};
+use ins_core::loss::{LossWeights, PerceptualLoss, StyleLoss};
 use ins_core::modules::cim::{SirenCim, SirenCimConfig};
 use ins_core::modules::ins::Ins;
 use ins_core::modules::sim::SimConfig;
@@ -200,8 +200,18 @@ impl Variant for Siren {
         load_images(cfg)
     }
 
+    fn palette(data: &SirenImages, max: usize) -> Vec<[f32; 3]> {
+        let stride = (data.content.data.len() / 3 / max.max(1)).max(1);
+        data.content
+            .data
+            .chunks_exact(3)
+            .step_by(stride)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect()
+    }
+
     fn resolve(cfg: &mut SirenRunConfig, _kind: RunKind, _data: &SirenImages) {
-        cfg.style.resolve(128, 128);
+        cfg.style.resolve(128, 128, StyleLoss::Gram);
     }
 
     fn inherit(_cfg: &mut SirenRunConfig, _base: &SirenRunConfig, from: &Path) -> Result<()> {

@@ -70,8 +70,10 @@ pub struct Stylize2dSettings {
     pub lr: f64,
     /// Style and content weights.
     pub weights: LossWeights,
-    /// Longer side of the painting for its Gram targets.
+    /// Longer side of the painting for its style targets.
     pub style_size: usize,
+    /// How the painting's style is matched.
+    pub style_loss: StyleLoss,
 }
 
 /// The task: fixed targets, one image to optimise.
@@ -86,15 +88,15 @@ pub struct Stylize2dTask {
 pub fn painting_loss(
     vgg: &Vgg,
     style: &RgbImage,
-    style_size: usize,
+    settings: &Stylize2dSettings,
     device: &Device,
 ) -> PerceptualLoss {
     let ad = device.clone().autodiff();
     PerceptualLoss::new(
         vgg.to_device(&ad),
         std::slice::from_ref(style),
-        style_size,
-        StyleLoss::Gram,
+        settings.style_size,
+        settings.style_loss,
         &ad,
     )
 }
@@ -142,7 +144,7 @@ pub fn stylize(
     opts: TrainOptions,
     device: &Device,
 ) -> Result<(RgbImage, TrainOutcome<Canvas>)> {
-    let perceptual = painting_loss(&vgg, style, settings.style_size, device);
+    let perceptual = painting_loss(&vgg, style, settings, device);
     stylize_with(content, &perceptual, settings, opts)
 }
 

@@ -145,7 +145,7 @@ pub fn constant_colour_psnr(photos: &[(&[f32], Vec<bool>)]) -> f64 {
 pub fn train_siren(
     cfg: &ins_models::siren::SirenRunConfig,
     vgg: vgg_import::Vgg,
-    device: &burn::prelude::Device,
+    device: &Device,
     opts: ins_core::train::TrainOptions,
 ) -> anyhow::Result<
     ins_core::train::TrainOutcome<ins_core::modules::ins::Ins<ins_core::modules::cim::SirenCim>>,
@@ -169,4 +169,69 @@ pub fn within<T: Send + 'static>(
         Ok(v) => v,
         Err(_) => panic!("{what} did not finish within {seconds} s"),
     }
+}
+
+/// A second test painting unlike the stripes: warm blotches of orange and green on olive.
+pub fn blotches(size: usize) -> ins_core::imaging::RgbImage {
+    let mut data = Vec::with_capacity(size * size * 3);
+    for v in 0..size {
+        for u in 0..size {
+            let (x, y) = (u as f32 / 6.0, v as f32 / 6.0);
+            let t = (x.sin() * y.cos() + (0.7 * x + 0.3 * y).sin()) * 0.5;
+            data.extend(if t > 0.3 {
+                [0.95, 0.55, 0.1]
+            } else if t < -0.3 {
+                [0.2, 0.7, 0.25]
+            } else {
+                [0.45, 0.45, 0.2]
+            });
+        }
+    }
+    ins_core::imaging::RgbImage {
+        width: size,
+        height: size,
+        data,
+    }
+}
+
+/// The style mixes `[1 − t, t]` for t = 0, 0.25, …, 1.
+pub const MIX_STEPS: [f32; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
+
+/// Asserts that `values` (one per step of a mix) move one way: never down when `rising`,
+/// never up otherwise, allowing a relative wobble of `slack` between neighbours, and that they
+/// moved overall.
+pub fn assert_monotone(values: &[f64], rising: bool, slack: f64, what: &str) {
+    for w in values.windows(2) {
+        let (a, b) = if rising { (w[0], w[1]) } else { (w[1], w[0]) };
+        assert!(
+            b >= a * (1.0 - slack),
+            "{what} is not monotone along the mix: {values:?}"
+        );
+    }
+    let (first, last) = (values[0], values[values.len() - 1]);
+    assert!(
+        if rising { last > first } else { last < first },
+        "{what} did not move along the mix: {values:?}"
+    );
+}
+
+/// The distance of `image` to a painting as `eval consistency` reads it: the nearest-neighbour
+/// feature distance (1 − the best cosine similarity to any position of the painting), averaged
+/// over the four style layers and over the positions `mask` marks. Unlike a Gram distance it
+/// does not fall just because an image is darker.
+pub fn painting_distance(
+    vgg: &vgg_import::Vgg,
+    painting: &ins_models::consistency::PaintingFeatures,
+    image: &ins_core::imaging::RgbImage,
+    mask: &[bool],
+    device: &Device,
+) -> f64 {
+    let d = ins_models::consistency::texture_distances(
+        vgg,
+        painting,
+        std::slice::from_ref(image),
+        &[mask.to_vec()],
+        device,
+    );
+    d.iter().sum::<f64>() / d.len() as f64
 }

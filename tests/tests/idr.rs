@@ -4,8 +4,8 @@
 
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{StyleTarget, style_loss};
 use ins_core::render::sphere_tracing::TraceOptions;
+use ins_models::consistency::PaintingFeatures;
 use ins_models::idr::eval::evaluate_views;
 use ins_models::idr::mesh::extract_mesh;
 use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
@@ -97,14 +97,16 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
         "held-out PSNR inside the mask {psnr:.2} dB is not clearly above a constant colour's {psnr_constant:.2} dB"
     );
 
-    // Stylize: the surface is frozen by default, so the silhouette is the same; colours move.
+    // Stylize with two paintings: the surface is frozen by default, so the silhouette is the
+    // same; colours move.
     let style = save_image(dir.path(), "stripes.png", &stripes(64));
+    let second = save_image(dir.path(), "blotches.png", &ins_tests::blotches(64));
     let st_dir = dir.path().join("stylized");
     let mut st = cfg.clone();
     st.source.scene = None;
     st.source.from = Some(run_dir.clone());
     st.schedule.steps = 40;
-    st.style.styles = vec![style];
+    st.style.styles = vec![style, second];
     st.style.patch = 24;
     st.style.stride = 1;
     st.style.style_size = 64;
@@ -128,21 +130,21 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
             "the silhouette changed although the SDF is frozen"
         );
     }
-    let target = StyleTarget::from_image(&vgg, stripes(64).to_tensor(&device)).grams;
-    let d = |img: RgbImage| {
-        style_loss(&vgg.features(img.to_tensor(&device)), &target).into_scalar::<f32>()
+    // Nearer each painting on the surface (nearest-neighbour feature distances, as `eval
+    // consistency` measures texture: a Gram distance also falls when the object just darkens).
+    let paintings = [stripes(64), ins_tests::blotches(64)]
+        .map(|p| PaintingFeatures::new(&vgg, &p, 64, &device));
+    let d = |img: &RgbImage, mask: &[bool]| {
+        ins_tests::painting_distance(&vgg, &paintings[0], img, mask, &device)
     };
-    // Measured where stylization trains (patches inside the mask): the mask's bounding box, so
-    // the black background of the whole frame does not dominate the Gram matrices.
-    let crop = |img: RgbImage, mask: &[bool]| ins_tests::crop_to_box(&img, mask);
     let mut closer = 0;
     for (a, b) in after.iter().zip(&evals) {
         let (d0, d1) = (
-            d(crop(b.render.image(), &b.mask)),
-            d(crop(a.render.image(), &a.mask)),
+            d(&b.render.image(), &b.render.hit),
+            d(&a.render.image(), &a.render.hit),
         );
         eprintln!(
-            "view {}: style distance inside the mask's box {d0} → {d1}",
+            "view {}: distance to the painting on the surface {d0:.4} → {d1:.4}",
             b.view
         );
         closer += (d1 < d0) as usize;
@@ -152,6 +154,30 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
         evals.len(),
         "stylizing did not bring every held-out view closer to the painting"
     );
+
+    // Along the mix from the stripes to the blotches, a held-out view leaves the one painting
+    // and nears the other, step by step.
+    let (mut to_first, mut to_second) = (Vec::new(), Vec::new());
+    let view = &evals[0];
+    for t in ins_tests::MIX_STEPS {
+        let code = srun.code(Some(&[1.0 - t, t]), &device).unwrap();
+        let r = ins_models::idr::eval::render_camera(
+            &srun.model.valid(),
+            srun.scene(),
+            &srun.scene().views[view.view].camera,
+            code,
+            &trace,
+            &device,
+        )
+        .unwrap();
+        let img = r.image();
+        let d = |p| ins_tests::painting_distance(&vgg, p, &img, &r.hit, &device);
+        to_first.push(d(&paintings[0]));
+        to_second.push(d(&paintings[1]));
+    }
+    eprintln!("along the mix: to the stripes {to_first:?}, to the blotches {to_second:?}");
+    ins_tests::assert_monotone(&to_first, true, 0.01, "the distance to the stripes");
+    ins_tests::assert_monotone(&to_second, false, 0.01, "the distance to the blotches");
 
     // A mesh of the reconstructed surface, coloured; closed and of a plausible size.
     let (mesh, colors) = extract_mesh(&run.model.valid(), 64, None, &device).unwrap();

@@ -4,8 +4,8 @@
 
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{StyleTarget, style_loss};
 use ins_core::modules::field::CimKind;
+use ins_models::consistency::PaintingFeatures;
 use ins_models::nerf::eval::{ViewRender, evaluate_views, render_camera};
 use ins_models::nerf::{Nerf, NerfRun, NerfRunConfig};
 use ins_models::run::scene::heldout_views;
@@ -112,22 +112,25 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
         grid.occupancy()
     );
 
-    // Stylize with stripes.
+    // Stylize with stripes and blotches (two styles: one-hot codes, mixes in between).
     let style = save_image(dir.path(), "stripes.png", &stripes(64));
+    let second = save_image(dir.path(), "blotches.png", &ins_tests::blotches(64));
     let st_dir = dir.path().join("stylized");
     let mut st_cfg = cfg.clone();
     st_cfg.source.scene = None;
     st_cfg.source.from = Some(run_dir.clone());
     st_cfg.schedule.steps = 150;
+    // At the default 1e-3, 150 steps leave the two styles nearly alike on this tiny scene.
+    st_cfg.schedule.lr = 5e-3;
     st_cfg.schedule.checkpoint_every = 100;
-    st_cfg.style.styles = vec![style];
+    st_cfg.style.styles = vec![style, second];
     st_cfg.style.patch = 24;
     st_cfg.style.stride = 2;
     st_cfg.style.style_size = 64;
     let vgg = real_vgg(&device);
     train::<Nerf>(&st_cfg, Some(vgg.clone()), &device, quiet_options(&st_dir)).unwrap();
     let st = NerfRun::load(&st_dir, &device).unwrap();
-    assert_eq!(st.model.n_styles(), 1);
+    assert_eq!(st.model.n_styles(), 2);
     let view = &st.scene().views[views[0]].camera;
     let code = st.code(None, &device).unwrap();
     let before = render_camera(
@@ -150,22 +153,46 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
         &device,
     )
     .unwrap();
-    // The colours moved towards the painting...
-    let target = StyleTarget::from_image(&vgg, stripes(64).to_tensor(&device)).grams;
-    let d = |img: RgbImage| {
-        style_loss(&vgg.features(img.to_tensor(&device)), &target).into_scalar::<f32>()
-    };
-    // Measured on the object's bounding box (opaque pixels of the pretrained render), so the
-    // white background does not dominate the Gram matrices.
+    // The object moved towards the painting (nearest-neighbour feature distances on the
+    // pixels the pretrained model renders opaque, as `eval consistency` measures texture)...
+    let paintings = [stripes(64), ins_tests::blotches(64)]
+        .map(|p| PaintingFeatures::new(&vgg, &p, 64, &device));
     let opaque: Vec<bool> = before.opacity.iter().map(|&o| o > 0.5).collect();
-    let crop = |img: RgbImage| ins_tests::crop_to_box(&img, &opaque);
-    let (d0, d1) = (d(crop(before.image())), d(crop(after.image())));
-    eprintln!("style distance on the object's box {d0} → {d1}");
-    assert!(d1 < 0.5 * d0, "style distance {d0} → {d1}");
+    let d = |img: &RgbImage, p| ins_tests::painting_distance(&vgg, p, img, &opaque, &device);
+    let (d0, d1) = (
+        d(&before.image(), &paintings[0]),
+        d(&after.image(), &paintings[0]),
+    );
+    eprintln!("distance to the painting on the object {d0:.4} → {d1:.4}");
+    assert!(d1 < d0 - 0.02, "distance to the painting {d0} → {d1}");
     // ...and the geometry did not.
     let err = median_depth_error(&after, &before);
     eprintln!("median relative depth error after stylizing {err}");
     assert!(err < 0.02, "median relative depth error {err}");
+
+    // Along the mix from the stripes to the blotches the render leaves the one painting and
+    // nears the other, step by step (nearest-neighbour feature distances, as `eval consistency`
+    // measures texture).
+    let (mut to_first, mut to_second) = (Vec::new(), Vec::new());
+    for t in ins_tests::MIX_STEPS {
+        let code = st.code(Some(&[1.0 - t, t]), &device).unwrap();
+        let r = render_camera(
+            &st.model.valid(),
+            st.scene(),
+            view,
+            st.sampling(),
+            code,
+            st.background(),
+            &device,
+        )
+        .unwrap();
+        let img = r.image();
+        to_first.push(d(&img, &paintings[0]));
+        to_second.push(d(&img, &paintings[1]));
+    }
+    eprintln!("along the mix: to the stripes {to_first:?}, to the blotches {to_second:?}");
+    ins_tests::assert_monotone(&to_first, true, 0.01, "the distance to the stripes");
+    ins_tests::assert_monotone(&to_second, false, 0.01, "the distance to the blotches");
 }
 
 #[test]

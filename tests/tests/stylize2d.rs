@@ -19,6 +19,7 @@ fn gatys_lowers_the_gram_distance_five_fold_and_keeps_the_content() {
         lr: 0.02,
         weights: LossWeights::default_for(vgg.preprocess, ins_core::loss::StyleLoss::Gram),
         style_size: 64,
+        style_loss: ins_core::loss::StyleLoss::Gram,
     };
     let (result, outcome) = stylize(
         &content,

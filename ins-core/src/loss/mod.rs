@@ -4,6 +4,7 @@
 //! Style: Σ over relu1_2, relu2_2, relu3_3, relu4_3 of mean((G(x) − G(s))²) with
 //! G = F Fᵀ / (C·H·W). Content: mean((relu2_2(x) − relu2_2(c))²).
 
+pub mod color_transfer;
 pub mod gram;
 pub mod gram_op;
 pub mod perceptual;
@@ -12,6 +13,7 @@ pub mod ssim;
 pub mod style;
 pub mod weights;
 
+pub use color_transfer::ColorTransfer;
 pub use gram::gram;
 pub use perceptual::{
     PerceptualLoss, StyleTarget, content_distance, content_loss, one_hot_codes, patch_images,

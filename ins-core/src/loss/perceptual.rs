@@ -3,6 +3,7 @@
 use burn::prelude::*;
 use vgg_import::{Vgg, VggFeatures};
 
+use super::color_transfer::ColorTransfer;
 use super::gram::gram;
 use super::style::{StyleLoss, StyleTargets};
 
@@ -117,6 +118,9 @@ pub struct PerceptualLoss {
     pub targets: StyleTargets,
     /// One-hot codes, `[S, S]`.
     pub codes: Tensor<2>,
+    /// Per style, the colour map that recolours the photos before their content features are
+    /// taken (ARF's colour transfer), where asked for.
+    pub recolor: Option<Vec<ColorTransfer>>,
 }
 
 impl PerceptualLoss {
@@ -138,7 +142,28 @@ impl PerceptualLoss {
             vgg,
             targets,
             codes: one_hot_codes(styles.len(), device),
+            recolor: None,
         }
+    }
+
+    /// The loss with the content photos recoloured into each painting's palette: `palette` is
+    /// a sample of the scene's colours, `styles` the paintings (in the loss's order).
+    pub fn with_color_transfer(
+        mut self,
+        palette: &[[f32; 3]],
+        styles: &[crate::imaging::RgbImage],
+    ) -> Self {
+        self.recolor = Some(
+            styles
+                .iter()
+                .map(|s| {
+                    let painting: Vec<[f32; 3]> =
+                        s.data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+                    ColorTransfer::fit(palette, &painting)
+                })
+                .collect(),
+        );
+        self
     }
 
     /// Number of styles.
@@ -152,8 +177,23 @@ impl PerceptualLoss {
         self.codes.clone().slice([0..1]).inner()
     }
 
-    /// The content target of a photo `[1, 3, H, W]`: its relu2_2 features, detached.
+    /// The content target of a photo `[1, 3, H, W]`: its relu2_2 features, detached; with
+    /// colour transfer, those of the photo recoloured for each style, `[S, C, H', W']`.
     pub fn content_target(&self, photo: Tensor<4>) -> Tensor<4> {
+        let photo = match &self.recolor {
+            None => photo,
+            Some(maps) => {
+                let device = photo.device();
+                let [_, _, h, w] = photo.dims();
+                let s = maps.len();
+                let a: Vec<f32> = maps.iter().flat_map(|m| m.matrix.concat()).collect();
+                let b: Vec<f32> = maps.iter().flat_map(|m| m.offset).collect();
+                let a = Tensor::<1>::from_floats(a.as_slice(), &device).reshape([s, 3, 3]);
+                let b = Tensor::<1>::from_floats(b.as_slice(), &device).reshape([s, 3, 1]);
+                let x = photo.reshape([1, 3, h * w]).expand([s, 3, h * w]);
+                (a.matmul(x) + b).clamp(0.0, 1.0).reshape([s, 3, h, w])
+            }
+        };
         self.vgg.features(photo).relu2_2.detach()
     }
 
@@ -177,4 +217,55 @@ pub fn patch_images<const D: usize>(rgb: Tensor<D>, styles: usize, k: usize) -> 
 /// A photo patch's pixels (row major, K·K of them) as an image `[1, 3, K, K]`.
 pub fn photo_patch(rgb: &[[f32; 3]], k: usize, device: &Device) -> Tensor<4> {
     patch_images(Tensor::<1>::from_floats(rgb.as_flattened(), device), 1, k)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::imaging::RgbImage;
+
+    fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> [f32; 3]) -> RgbImage {
+        let f = &f;
+        let data = (0..h)
+            .flat_map(|y| (0..w).flat_map(move |x| f(x, y)))
+            .collect();
+        RgbImage {
+            width: w,
+            height: h,
+            data,
+        }
+    }
+
+    #[test]
+    fn colour_transfer_recolours_the_content_per_style() {
+        let d = Device::flex();
+        d.seed(1);
+        let vgg = Vgg {
+            net: vgg_import::Vgg16Features::random(&d),
+            preprocess: vgg_import::Preprocess::Caffe,
+        };
+        let photo = image(16, 16, |x, y| [x as f32 / 16.0, y as f32 / 16.0, 0.5]);
+        let blue = image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]);
+        let plain =
+            PerceptualLoss::new(vgg, &[photo.clone(), blue.clone()], 16, StyleLoss::Gram, &d);
+        let target = plain.content_target(photo.to_tensor(&d));
+        assert_eq!(target.dims()[0], 1);
+        let palette: Vec<[f32; 3]> = photo.data.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let recoloured = plain
+            .clone()
+            .with_color_transfer(&palette, &[photo.clone(), blue]);
+        let t = recoloured.content_target(photo.to_tensor(&d));
+        // One target per style: the first painting is the photo itself (the map is the
+        // identity), the second recolours it.
+        assert_eq!(t.dims()[0], 2);
+        let same = (t.clone().slice([0..1]) - target.clone())
+            .abs()
+            .max()
+            .into_scalar::<f32>();
+        let other = (t.slice([1..2]) - target).abs().max().into_scalar::<f32>();
+        assert!(
+            same < 1e-2 * other,
+            "identity map moved the target: {same} vs {other}"
+        );
+    }
 }

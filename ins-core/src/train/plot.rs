@@ -333,7 +333,7 @@ pub fn plot_strength_consistency(points: &[StrengthPoint], path: &Path) -> Resul
                 chart
                     .draw_series(std::iter::once(Circle::new((x, y), 7, c.filled())))
                     .map_err(draw_err)?
-                    .label(format!("{} (● k=1, ▲ k=7)", p.set))
+                    .label(format!("{}: circle k=1, triangle k=7", p.set))
                     .legend(move |(x, y)| Circle::new((x + 8, y), 6, c.filled()));
             }
             if let Some(y) = p.rmse[1] {

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
-use ins_core::loss::{LossWeights, PerceptualLoss};
+use ins_core::loss::{LossWeights, PerceptualLoss, StyleLoss};
 use ins_core::modules::style_position::TEXTURE_LR_MULT;
 use ins_core::train::{LrSchedule, Phase, RunFolder};
 use ins_scene::data::{Scene, SceneFormat, Split, detect_format};
@@ -110,10 +110,14 @@ impl Variant for Idr {
         Ok(scene)
     }
 
+    fn palette(data: &Scene, max: usize) -> Vec<[f32; 3]> {
+        data.object_colors(Split::Train, max)
+    }
+
     fn resolve(cfg: &mut IdrRunConfig, kind: RunKind, _data: &Scene) {
         cfg.schedule.steps = cfg.steps_for(kind);
         cfg.schedule.lr = cfg.lr_for(kind);
-        cfg.style.resolve(64, 256);
+        cfg.style.resolve(64, 256, StyleLoss::Nnfm);
         cfg.stylizer.sim_width = cfg.sim_width_for();
     }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{LossWeights, PerceptualLoss};
+use ins_core::loss::{LossWeights, PerceptualLoss, StyleLoss};
 use ins_core::modules::field::CimKind;
 use ins_core::modules::style_position::TEXTURE_LR_MULT;
 use ins_core::render::occupancy::OccupancyGrid;
@@ -81,13 +81,17 @@ impl Variant for Nerf {
         Ok(NerfScene { scene, format })
     }
 
+    fn palette(data: &NerfScene, max: usize) -> Vec<[f32; 3]> {
+        data.scene.object_colors(ins_scene::data::Split::Train, max)
+    }
+
     fn resolve(cfg: &mut NerfRunConfig, kind: RunKind, data: &NerfScene) {
         cfg.schedule.steps = match kind {
             RunKind::Pretrain => cfg.pretrain_steps_for(data.format),
             RunKind::Stylize => cfg.steps_for(kind),
         };
         cfg.schedule.lr = cfg.lr_for(kind);
-        cfg.style.resolve(64, 256);
+        cfg.style.resolve(64, 256, StyleLoss::Nnfm);
     }
 
     fn inherit(cfg: &mut NerfRunConfig, base: &NerfRunConfig, from: &Path) -> Result<()> {

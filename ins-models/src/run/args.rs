@@ -104,15 +104,21 @@ pub struct StyleArgs {
     pub style_size: usize,
     /// How the paintings' style is matched: gram (Gatys' Gram matrices, the paper's), nnfm
     /// (ARF's nearest-neighbour feature matching) or mean-std (AdaIN's channel statistics).
-    #[arg(long, default_value = "gram")]
-    #[serde(default)]
-    pub style_loss: StyleLoss,
+    /// Default: nnfm for NeRF and IDR (it draws the painting's strokes on the object where
+    /// Gram carried mostly its palette, docs/measurements.md), gram for SIREN.
+    #[arg(long)]
+    pub style_loss: Option<StyleLoss>,
     /// Style loss weight (default: per style loss and VGG preprocessing).
     #[arg(long)]
     pub style_weight: Option<f64>,
     /// Content loss weight (default: per VGG preprocessing).
     #[arg(long)]
     pub content_weight: Option<f64>,
+    /// Recolour the photos into each painting's palette (mean and covariance of its colours)
+    /// before taking their content features (ARF's colour transfer).
+    #[arg(long)]
+    #[serde(default)]
+    pub color_transfer: bool,
     /// Rays (or pixels) per side of a stylization patch (0: 128 for SIREN, 64 for NeRF and IDR).
     #[arg(long, default_value_t = 0)]
     pub patch: usize,
@@ -128,8 +134,14 @@ impl Default for StyleArgs {
 }
 
 impl StyleArgs {
-    /// Fills the fields left at 0 with a variant's defaults.
-    pub fn resolve(&mut self, patch: usize, style_size: usize) {
+    /// The style loss that ran: a run folder written before the choice existed used Gram.
+    pub fn loss(&self) -> StyleLoss {
+        self.style_loss.unwrap_or(StyleLoss::Gram)
+    }
+
+    /// Fills the fields left at 0 (or unset) with a variant's defaults.
+    pub fn resolve(&mut self, patch: usize, style_size: usize, style_loss: StyleLoss) {
+        self.style_loss.get_or_insert(style_loss);
         if self.patch == 0 {
             self.patch = patch;
         }
@@ -151,9 +163,9 @@ pub struct StylizerArgs {
     #[arg(long, default_value_t = 4)]
     pub position_freqs: usize,
     /// Stylization: finest resolution of the SIM's own texture hash grid over the scene's box
-    /// (0: none, the SIM sees only the octaves). A run folder written before it existed has
-    /// none.
-    #[arg(long, default_value_t = 0)]
+    /// (0: none, the SIM sees only the octaves). The octaves alone cannot draw strokes at a
+    /// pixel's scale; a run folder written before the grid existed has none.
+    #[arg(long, default_value_t = 256)]
     #[serde(default)]
     pub sim_grid: u32,
 }

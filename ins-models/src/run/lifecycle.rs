@@ -81,12 +81,18 @@ pub fn train<V: Variant>(
         let vgg = vgg.context("stylizing needs VGG-16")?.to_device(&ad);
         let preprocess = vgg.preprocess;
         let s = V::style(&cfg);
-        let loss = PerceptualLoss::new(vgg, &styles, s.style_size, s.style_loss, &ad);
+        let mut loss = PerceptualLoss::new(vgg, &styles, s.style_size, s.loss(), &ad);
+        if s.color_transfer {
+            let data = match &start {
+                Start::Fresh(data) => data,
+                Start::From(base) => &base.data,
+            };
+            loss = loss.with_color_transfer(&V::palette(data, PALETTE_SAMPLE), &styles);
+        }
         (Some(loss), preprocess)
     };
     let s = V::style(&cfg);
-    let weights =
-        LossWeights::or_defaults(preprocess, s.style_loss, s.content_weight, s.style_weight);
+    let weights = LossWeights::or_defaults(preprocess, s.loss(), s.content_weight, s.style_weight);
     let mut task = V::task(&cfg, start, style, &folder, &ad)?;
     let phases = V::phases(&cfg, kind, weights);
     let outcome = Trainer::new(phases, opts).run(&mut task, model)?;
@@ -95,6 +101,9 @@ pub fn train<V: Variant>(
     }
     Ok(outcome)
 }
+
+/// Colours of the training photos sampled for colour transfer.
+const PALETTE_SAMPLE: usize = 65536;
 
 /// The paintings, each read now so a missing or damaged one stops the run before it starts.
 fn load_styles(paths: &[PathBuf]) -> Result<Vec<RgbImage>> {

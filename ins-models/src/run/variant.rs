@@ -55,6 +55,9 @@ pub trait Variant: Sized + 'static {
     /// Loads the data the config names (for a stylized run's config, its base's), writing back
     /// settings chosen from the data (an automatic downscale).
     fn load_data(cfg: &mut Self::Config) -> Result<Self::Data>;
+    /// About `max` colours of the data's training photos, on the object where it has masks
+    /// (what colour transfer maps to the painting's palette).
+    fn palette(data: &Self::Data, max: usize) -> Vec<[f32; 3]>;
     /// Fills the config's defaults that depend on the kind of run and the data (steps,
     /// learning rate, patch), so `config.json` holds the values that ran.
     fn resolve(cfg: &mut Self::Config, kind: RunKind, data: &Self::Data);

@@ -173,6 +173,35 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// About `max` colours of the split's photos, a regular subsample of their pixels, on the
+    /// object where the views have masks: the scene's palette.
+    pub fn object_colors(&self, split: Split, max: usize) -> Vec<[f32; 3]> {
+        let views = self.split(split);
+        let total: usize = views
+            .iter()
+            .map(|&i| (self.views[i].image.width * self.views[i].image.height) as usize)
+            .sum();
+        let stride = (total / max.max(1)).max(1);
+        let mut out = Vec::with_capacity(max);
+        let mut k = 0usize;
+        for &i in views {
+            let v = &self.views[i];
+            let (w, h) = (v.image.width, v.image.height);
+            for y in 0..h {
+                for x in 0..w {
+                    k += 1;
+                    if !k.is_multiple_of(stride) {
+                        continue;
+                    }
+                    if v.mask.as_ref().is_none_or(|m| m.value(x, y) > 0.5) {
+                        out.push(v.image.rgb(x, y));
+                    }
+                }
+            }
+        }
+        out
+    }
+
     /// View indices of a split.
     pub fn split(&self, split: Split) -> &[usize] {
         match split {
