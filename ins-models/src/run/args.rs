@@ -184,3 +184,34 @@ impl Default for StylizerArgs {
         crate::config::clap_defaults()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_style_loss_left_unset_takes_the_variants_default_and_old_runs_read_as_gram() {
+        let mut flags = StyleArgs::default();
+        assert_eq!(flags.style_loss, None);
+        flags.resolve(64, 256, StyleLoss::Nnfm);
+        assert_eq!(flags.loss(), StyleLoss::Nnfm);
+        let mut chosen = StyleArgs {
+            style_loss: Some(StyleLoss::MeanStd),
+            ..StyleArgs::default()
+        };
+        chosen.resolve(64, 256, StyleLoss::Nnfm);
+        assert_eq!(chosen.loss(), StyleLoss::MeanStd);
+        // A run folder written before the choice existed has no field: it ran Gram.
+        let old: StyleArgs = serde_json::from_str(r#"{"styles": ["a.png"], "style_size": 256}"#)
+            .expect("an old style group parses");
+        assert_eq!(old.loss(), StyleLoss::Gram);
+    }
+
+    #[test]
+    fn scene_stylizers_get_a_texture_grid_unless_an_old_run_had_none() {
+        assert_eq!(StylizerArgs::default().sim_grid, 256);
+        let old: StylizerArgs =
+            serde_json::from_str(r#"{"sim_width": 64, "position_freqs": 4}"#).expect("parses");
+        assert_eq!(old.sim_grid, 0);
+    }
+}
