@@ -197,22 +197,36 @@ pub fn blotches(size: usize) -> ins_core::imaging::RgbImage {
 /// The style mixes `[1 − t, t]` for t = 0, 0.25, …, 1.
 pub const MIX_STEPS: [f32; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
 
-/// Asserts that `values` (one per step of a mix) move one way: never down when `rising`,
-/// never up otherwise, allowing a relative wobble of `slack` between neighbours, and that they
-/// moved overall.
+/// Asserts that the last of `values` lies at least [`MIX_MIN_MOVE`] above the first (below
+/// it unless `rising`); returns the move.
+pub fn assert_moved(values: &[f64], rising: bool, what: &str) -> f64 {
+    let sign = if rising { 1.0 } else { -1.0 };
+    let total = sign * (values[values.len() - 1] - values[0]);
+    assert!(
+        total >= MIX_MIN_MOVE,
+        "{what} did not move along the mix: {values:?}"
+    );
+    total
+}
+
+/// How far a painting's distance must move over a whole mix (nearest-neighbour feature
+/// distance, 0 to 1). A model that ignores its style code renders the same image at every mix
+/// and moves 0; the NeRF test's runs moved 0.03 to 0.23 (training is not bit-reproducible).
+pub const MIX_MIN_MOVE: f64 = 0.01;
+
+/// Asserts that `values` (one per step of a mix) move one way, up when `rising`, down
+/// otherwise: overall by at least [`MIX_MIN_MOVE`], and never back between neighbours by more
+/// than `slack` of that overall move. Training is not bit-reproducible across runs (thread
+/// scheduling orders the sums), and neighbouring mixes wobble by a few per cent of the range.
 pub fn assert_monotone(values: &[f64], rising: bool, slack: f64, what: &str) {
+    let sign = if rising { 1.0 } else { -1.0 };
+    let total = assert_moved(values, rising, what);
     for w in values.windows(2) {
-        let (a, b) = if rising { (w[0], w[1]) } else { (w[1], w[0]) };
         assert!(
-            b >= a * (1.0 - slack),
+            sign * (w[1] - w[0]) >= -slack * total,
             "{what} is not monotone along the mix: {values:?}"
         );
     }
-    let (first, last) = (values[0], values[values.len() - 1]);
-    assert!(
-        if rising { last > first } else { last < first },
-        "{what} did not move along the mix: {values:?}"
-    );
 }
 
 /// The distance of `image` to a painting as `eval consistency` reads it: the nearest-neighbour

@@ -176,8 +176,8 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
         to_second.push(d(&paintings[1]));
     }
     eprintln!("along the mix: to the stripes {to_first:?}, to the blotches {to_second:?}");
-    ins_tests::assert_monotone(&to_first, true, 0.01, "the distance to the stripes");
-    ins_tests::assert_monotone(&to_second, false, 0.01, "the distance to the blotches");
+    ins_tests::assert_monotone(&to_first, true, 0.15, "the distance to the stripes");
+    ins_tests::assert_monotone(&to_second, false, 0.15, "the distance to the blotches");
 
     // A mesh of the reconstructed surface, coloured; closed and of a plausible size.
     let (mesh, colors) = extract_mesh(&run.model.valid(), 64, None, &device).unwrap();
