@@ -159,10 +159,11 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     // and nears the other, step by step.
     let (mut to_first, mut to_second) = (Vec::new(), Vec::new());
     let view = &evals[0];
+    let stylized = srun.model.valid();
     for t in ins_tests::MIX_STEPS {
         let code = srun.code(Some(&[1.0 - t, t]), &device).unwrap();
         let r = ins_models::idr::eval::render_camera(
-            &srun.model.valid(),
+            &stylized,
             srun.scene(),
             &srun.scene().views[view.view].camera,
             code,

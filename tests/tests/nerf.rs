@@ -143,16 +143,20 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
         &device,
     )
     .unwrap();
-    let after = render_camera(
-        &st.model.valid(),
-        st.scene(),
-        view,
-        st.sampling(),
-        code,
-        st.background(),
-        &device,
-    )
-    .unwrap();
+    let stylized = st.model.valid();
+    let render_stylized = |code| {
+        render_camera(
+            &stylized,
+            st.scene(),
+            view,
+            st.sampling(),
+            code,
+            st.background(),
+            &device,
+        )
+        .unwrap()
+    };
+    let after = render_stylized(code);
     // The object moved towards the painting (nearest-neighbour feature distances on the
     // pixels the pretrained model renders opaque, as `eval consistency` measures texture)...
     let paintings = [stripes(64), ins_tests::blotches(64)]
@@ -176,17 +180,7 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     let (mut to_first, mut to_second) = (Vec::new(), Vec::new());
     for t in ins_tests::MIX_STEPS {
         let code = st.code(Some(&[1.0 - t, t]), &device).unwrap();
-        let r = render_camera(
-            &st.model.valid(),
-            st.scene(),
-            view,
-            st.sampling(),
-            code,
-            st.background(),
-            &device,
-        )
-        .unwrap();
-        let img = r.image();
+        let img = render_stylized(code).image();
         to_first.push(d(&img, &paintings[0]));
         to_second.push(d(&img, &paintings[1]));
     }
