@@ -7,6 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 use ins_scene::data::check::check_scene;
+use ins_scene::data::colmap_model::Encoding;
 use ins_scene::data::contact_sheet::contact_sheet;
 use ins_scene::data::synthetic::{self, SynthOptions};
 use ins_scene::data::{LoadOptions, Scene, SceneFormat, Split};
@@ -18,8 +19,10 @@ pub enum DataCommand {
     /// Summarize a scene folder (format detected), run geometric sanity checks and write a
     /// contact sheet of thumbnails with the bounding volume drawn in.
     Check {
-        /// Scene folder (Blender, LLFF or DTU/IDR layout).
+        /// Scene folder (Blender, LLFF, DTU/IDR, COLMAP workspace or transforms.json capture).
         dir: PathBuf,
+        #[command(flatten)]
+        read: ReadArgs,
         /// Print the report as JSON instead of text.
         #[arg(long)]
         json: bool,
@@ -29,9 +32,6 @@ pub enum DataCommand {
         /// Do not write a contact sheet.
         #[arg(long, conflicts_with = "sheet")]
         no_sheet: bool,
-        /// Integer downscale factor applied when loading.
-        #[arg(long, default_value_t = 1)]
-        downscale: u32,
     },
     /// Print one JSON line per pixel: the ray through its centre, in the scene frame (DTU: the
     /// unit-sphere frame; LLFF: the rescaled, recentred frame).
@@ -47,15 +47,21 @@ pub enum DataCommand {
         /// Pixel as COLUMN,ROW (integers; the ray goes through the centre (u+0.5, v+0.5)).
         #[arg(long = "pixel", required = true, value_parser = parse_pixel)]
         pixels: Vec<(u32, u32)>,
-        /// Integer downscale factor applied when loading (pixels count in the downscaled image).
-        #[arg(long, default_value_t = 1)]
-        downscale: u32,
+        #[command(flatten)]
+        read: ReadArgs,
     },
     /// Write a small analytic scene (spheres, boxes, checker textures) in a dataset format.
     Synth {
-        /// blender, llff or dtu.
+        /// blender, llff, dtu, colmap or transforms.
         #[arg(long)]
         format: SceneFormat,
+        /// Captures (colmap, transforms): `object` (around a tabletop) or `forward` (a
+        /// forward-facing grid).
+        #[arg(long, default_value = "object")]
+        layout: String,
+        /// COLMAP: write the model as text instead of binary.
+        #[arg(long)]
+        text: bool,
         /// Output folder (created).
         #[arg(long)]
         out: PathBuf,
@@ -66,6 +72,39 @@ pub enum DataCommand {
         #[arg(long, default_value_t = 10)]
         views: usize,
     },
+    /// Pose a folder of plain photos with COLMAP's structure from motion (through pycolmap,
+    /// installed on first use) and write a COLMAP workspace to train on.
+    Sfm(crate::sfm_cmd::SfmArgs),
+}
+
+/// How a scene is read by the data commands.
+#[derive(clap::Args, Debug)]
+pub struct ReadArgs {
+    /// Integer downscale factor applied when loading (pixels count in the downscaled image).
+    #[arg(long, default_value_t = 1)]
+    downscale: u32,
+    /// Read the folder as this format instead of detecting it (blender, llff, dtu, colmap,
+    /// transforms).
+    #[arg(long)]
+    format: Option<SceneFormat>,
+    /// COLMAP: the folder of the photos the model names (default: images/ in the workspace).
+    #[arg(long)]
+    images: Option<PathBuf>,
+}
+
+impl ReadArgs {
+    fn load(&self, dir: &Path, splits: Option<Vec<Split>>) -> Result<Scene> {
+        let opts = LoadOptions {
+            downscale: self.downscale,
+            splits,
+            image_dir: self.images.clone(),
+            ..Default::default()
+        };
+        Ok(match self.format {
+            Some(f) => Scene::load_as(f, dir, &opts)?,
+            None => Scene::load(dir, &opts)?,
+        })
+    }
 }
 
 /// Runs a data command.
@@ -73,25 +112,43 @@ pub fn run(cmd: DataCommand) -> Result<()> {
     match cmd {
         DataCommand::Check {
             dir,
+            read,
             json,
             sheet,
             no_sheet,
-            downscale,
-        } => check(&dir, json, sheet, no_sheet, downscale),
+        } => check(&dir, &read, json, sheet, no_sheet),
         DataCommand::Rays {
             dir,
             split,
             view,
             pixels,
-            downscale,
-        } => rays(&dir, split, view, &pixels, downscale),
+            read,
+        } => rays(&dir, split, view, &pixels, &read),
+        DataCommand::Sfm(args) => crate::sfm_cmd::run(args),
         DataCommand::Synth {
             format,
+            layout,
+            text,
             out,
             size,
             views,
         } => {
-            let s = synthetic::write(format, &out, &SynthOptions { size, views })?;
+            let opts = SynthOptions { size, views };
+            let layout = match layout.as_str() {
+                "object" => synthetic::CaptureLayout::ObjectCentred,
+                "forward" => synthetic::CaptureLayout::ForwardFacing,
+                other => bail!("--layout {other}: expected object or forward"),
+            };
+            let encoding = if text {
+                Encoding::Text
+            } else {
+                Encoding::Binary
+            };
+            let s = match format {
+                SceneFormat::Colmap => synthetic::write_colmap(&out, &opts, layout, encoding)?,
+                SceneFormat::Transforms => synthetic::write_transforms(&out, &opts, layout)?,
+                _ => synthetic::write(format, &out, &opts)?,
+            };
             println!(
                 "wrote a {format} scene with {} views to {}",
                 s.views.len(),
@@ -116,19 +173,13 @@ fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
 
 fn check(
     dir: &Path,
+    read: &ReadArgs,
     json: bool,
     sheet: Option<PathBuf>,
     no_sheet: bool,
-    downscale: u32,
 ) -> Result<()> {
     let t = Instant::now();
-    let scene = Scene::load(
-        dir,
-        &LoadOptions {
-            downscale,
-            ..Default::default()
-        },
-    )?;
+    let scene = read.load(dir, None)?;
     let load_s = t.elapsed().as_secs_f64();
     let report = check_scene(&scene);
     let sheet_path = if no_sheet {
@@ -170,6 +221,10 @@ fn check(
             "fixed"
         };
         println!("depth    near {:.3}, far {:.3} ({range})", s.near, s.far);
+        println!("frame    {}", s.frame);
+        if let Some(lens) = &s.lens {
+            println!("lens     {lens}");
+        }
         match s.bounds {
             Bounds::Sphere { center, radius } => {
                 println!("bounds   sphere centre {center:?} radius {radius}")
@@ -232,14 +287,9 @@ fn rays(
     split: Split,
     view: usize,
     pixels: &[(u32, u32)],
-    downscale: u32,
+    read: &ReadArgs,
 ) -> Result<()> {
-    let opts = LoadOptions {
-        downscale,
-        splits: Some(vec![split]),
-        ..Default::default()
-    };
-    let scene = Scene::load(dir, &opts)?;
+    let scene = read.load(dir, Some(vec![split]))?;
     let views = scene.split(split);
     let &index = views.get(view).with_context(|| {
         format!(

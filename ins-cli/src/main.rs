@@ -8,6 +8,7 @@ mod data_cmd;
 mod idr_cmd;
 mod nerf_cmd;
 mod report_cmd;
+mod sfm_cmd;
 mod siren_cmd;
 mod stylize2d_cmd;
 mod vgg_cmd;

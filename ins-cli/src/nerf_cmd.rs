@@ -177,10 +177,7 @@ pub fn render(a: RenderNerf) -> Result<()> {
 /// The path of a scene when none is asked for: the LLFF spiral for forward-facing scenes, a
 /// turntable for the others.
 pub fn default_path(run: &NerfRun) -> &'static str {
-    match run.scene().format {
-        ins_scene::data::SceneFormat::Llff => "spiral",
-        _ => "turntable",
-    }
+    ins_scene::paths::default_kind(run.scene())
 }
 
 /// The cameras of a `--path` (spiral or turntable; default: spiral for forward-facing scenes,

@@ -14,7 +14,7 @@ use ins_core::loss::{content_loss, style_loss};
 use ins_core::render::sphere_tracing::TraceOptions;
 use ins_core::train::RunFolder;
 use ins_scene::camera::Camera;
-use ins_scene::data::{Scene, SceneFormat};
+use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::paths::{spiral_for_scene, turntable_for_scene};
 use serde::Serialize;
@@ -218,10 +218,7 @@ impl StylizedPair {
 
     /// The default path: the spiral for forward-facing scenes, a turntable for the others.
     pub fn default_path(&self) -> &'static str {
-        match self.student.scene().format {
-            SceneFormat::Llff => "spiral",
-            _ => "turntable",
-        }
+        ins_scene::paths::default_kind(self.student.scene())
     }
 
     /// The cameras of a `kind` path (default: [`StylizedPair::default_path`]) of `frames`.

@@ -6,10 +6,12 @@
 //! so its centre is `(u + 0.5, v + 0.5)`. Intrinsics are OpenCV style (`fx, fy, cx, cy, skew`
 //! with `K = [[fx, skew, cx], [0, fy, cy], [0, 0, 1]]` acting on (x right, y down, z forward)
 //! coordinates), so the camera-frame direction of continuous pixel position `(x, y)` is
-//! `[(x − cx − skew·y_n)/fx, −y_n, −1]` with `y_n = (y − cy)/fy`.
+//! `[(x − cx − skew·y_n)/fx, −y_n, −1]` with `y_n = (y − cy)/fy`, after undistorting
+//! `(x_n, y_n)` when the camera has lens [`Distortion`].
 
 use serde::Serialize;
 
+use super::distortion::Distortion;
 use super::geometry::{Mat3, Vec3, mat3_from_rows};
 
 /// A pinhole camera: image size, intrinsics and camera-to-world pose.
@@ -31,6 +33,10 @@ pub struct Camera {
     pub skew: f32,
     /// Camera-to-world `[R | t]`, row major, OpenGL axes (x right, y up, looking down −z).
     pub c2w: [[f32; 4]; 3],
+    /// Lens distortion of the images this camera took (real captures); rays and projections
+    /// follow it exactly.
+    #[serde(skip_serializing_if = "Distortion::is_none")]
+    pub distortion: Distortion,
 }
 
 impl Camera {
@@ -53,6 +59,21 @@ impl Camera {
             cy,
             skew: 0.0,
             c2w,
+            distortion: Distortion::None,
+        }
+    }
+
+    /// The same camera with `distortion`.
+    pub fn with_distortion(self, distortion: Distortion) -> Camera {
+        Camera { distortion, ..self }
+    }
+
+    /// The same camera as an ideal pinhole: what rendered paths use, so novel views come out
+    /// free of the capture lens' distortion.
+    pub fn pinhole(&self) -> Camera {
+        Camera {
+            distortion: Distortion::None,
+            ..self.clone()
         }
     }
 
@@ -118,7 +139,11 @@ impl Camera {
     pub fn direction_camera(&self, x: f32, y: f32) -> Vec3 {
         let yn = (y - self.cy) / self.fy;
         let xn = (x - self.cx - self.skew * yn) / self.fx;
-        Vec3::new(xn, -yn, -1.0)
+        if matches!(self.distortion, Distortion::None) {
+            return Vec3::new(xn, -yn, -1.0);
+        }
+        let (xu, yu) = self.distortion.undistort(xn as f64, yn as f64);
+        Vec3::new(xu as f32, -yu as f32, -1.0)
     }
 
     /// World-space ray `(origin, unit direction)` through continuous pixel position `(x, y)`.
@@ -151,8 +176,13 @@ impl Camera {
         if z <= 1e-8 {
             return None;
         }
-        let xn = c[0] / z;
-        let yn = -c[1] / z;
+        let (xn, yn) = match self.distortion {
+            Distortion::None => (c[0] / z, -c[1] / z),
+            d => {
+                let (x, y) = d.distort((c[0] / z) as f64, (-c[1] / z) as f64);
+                (x as f32, y as f32)
+            }
+        };
         Some([
             self.fx * xn + self.skew * yn + self.cx,
             self.fy * yn + self.cy,
@@ -198,6 +228,7 @@ impl Camera {
             cy: self.cy * sy,
             skew: self.skew * sx,
             c2w: self.c2w,
+            distortion: self.distortion,
         }
     }
 }

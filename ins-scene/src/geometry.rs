@@ -158,6 +158,41 @@ impl Bounds {
     }
 }
 
+/// Scene contraction for unbounded captures (mip-NeRF 360's, with the max norm as nerfacto and
+/// Zip-NeRF use, so the contracted space is a cube a grid fills): points within `radius` (max
+/// norm) stay where they are; a point at max norm `n > radius` moves to
+/// `(2 − radius/n) · radius · p/n`, so all of space fits in the cube of half side `2·radius`
+/// and the far background gets a share of the grid that shrinks with distance.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct Contraction {
+    /// Half side of the cube left as it is (the scene frame's units).
+    pub radius: f32,
+}
+
+impl Contraction {
+    /// The contracted point.
+    pub fn apply(&self, p: Vec3) -> Vec3 {
+        let n = p.abs().max_element();
+        if n <= self.radius {
+            return p;
+        }
+        p * ((2.0 - self.radius / n) * self.radius / n)
+    }
+
+    /// How much longer a step at `p` is than at the centre for the contracted spacing of
+    /// samples to stay even: `(n / radius)²` beyond the radius (the contraction's radial
+    /// derivative is `(radius / n)²`), 1 inside.
+    pub fn step_scale(&self, p: Vec3) -> f32 {
+        let n = p.abs().max_element() / self.radius;
+        if n <= 1.0 { 1.0 } else { n * n }
+    }
+
+    /// Half side of the cube that holds all contracted space.
+    pub fn extent(&self) -> f32 {
+        2.0 * self.radius
+    }
+}
+
 /// A similarity transform `p ↦ scale · R p + t` (rotation, uniform scale, translation).
 ///
 /// Loaders that move the data into a normalized frame (LLFF recentring and rescaling, DTU's
@@ -255,6 +290,31 @@ mod tests {
         let p = Vec3::new(0.3, -0.2, 1.0);
         let want = 2.5 * (r * p) + Vec3::new(1.0, -2.0, 0.5);
         assert!((s.apply_point(p) - want).length() < 1e-5);
+    }
+
+    #[test]
+    fn contraction_keeps_the_inside_and_folds_everything_into_the_cube() {
+        let c = Contraction { radius: 2.0 };
+        let inside = Vec3::new(1.5, -2.0, 0.3);
+        assert_eq!(c.apply(inside), inside);
+        for p in [
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(-1e6, 5.0, 2.0),
+            Vec3::splat(40.0),
+        ] {
+            let q = c.apply(p);
+            assert!(q.abs().max_element() < c.extent(), "{p} → {q}");
+            // Direction kept, and farther points stay farther.
+            assert!(q.normalize().dot(p.normalize()) > 0.9999);
+            assert!(c.apply(p * 2.0).abs().max_element() > q.abs().max_element());
+        }
+        // Continuous at the radius, and the step scale matches the radial derivative.
+        let edge = Vec3::new(2.0, 0.5, 0.0);
+        assert!((c.apply(edge * 1.0001) - edge).length() < 1e-3);
+        let p = Vec3::new(6.0, 1.0, 0.0);
+        let h = 1e-2;
+        let deriv = (c.apply(p + Vec3::X * h).x - c.apply(p).x) / h;
+        assert!((deriv * c.step_scale(p) - 1.0).abs() < 1e-2, "{deriv}");
     }
 
     #[test]

@@ -12,6 +12,7 @@
 
 pub mod camera;
 pub mod data;
+pub mod distortion;
 pub mod geometry;
 pub mod mask_sampler;
 pub mod patches;

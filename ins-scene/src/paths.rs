@@ -27,7 +27,7 @@ pub fn turntable(
             let eye = center + dir * radius;
             Camera {
                 c2w: pose_look_at(eye, center, up),
-                ..template.clone()
+                ..template.pinhole()
             }
         })
         .collect()
@@ -107,7 +107,7 @@ pub fn spiral(
             let back = (c - focus).normalize_or_zero();
             Camera {
                 c2w: pose_from_back_up(back, up, c),
-                ..template.clone()
+                ..template.pinhole()
             }
         })
         .collect()
@@ -127,6 +127,16 @@ pub fn spiral_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
         hi = hi.max(b);
     }
     Some(spiral(&cams, lo, hi, n, 2.0))
+}
+
+/// The path a scene is shown along when none is asked for: `"spiral"` for forward-facing
+/// scenes (LLFF, forward captures), `"turntable"` for the others.
+pub fn default_kind(scene: &Scene) -> &'static str {
+    if scene.forward_facing {
+        "spiral"
+    } else {
+        "turntable"
+    }
 }
 
 /// The LLFF `poses_avg`: centre = mean position, back axis = normalized sum of back axes, up =
@@ -149,7 +159,7 @@ pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
             Quat::from_mat3(&a.rotation()).normalize(),
             Quat::from_mat3(&b.rotation()).normalize(),
         );
-        out.push(a.clone());
+        out.push(a.pinhole());
         for k in 1..per_segment.max(1) {
             let t = k as f32 / per_segment.max(1) as f32;
             let r = mat3_rows(Mat3::from_quat(qa.slerp(qb, t)));
@@ -168,11 +178,12 @@ pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
                     [r[1][0], r[1][1], r[1][2], p[1]],
                     [r[2][0], r[2][1], r[2][2], p[2]],
                 ],
+                distortion: Default::default(),
             });
         }
     }
     if let Some(last) = keys.last() {
-        out.push(last.clone());
+        out.push(last.pinhole());
     }
     out
 }

@@ -319,6 +319,40 @@ fn dtu_cameras() {
 }
 
 #[test]
+fn colmap_models() {
+    use ins_scene::data::colmap_model::Encoding;
+    use ins_scene::data::synthetic::{CaptureLayout, write_colmap};
+    for (enc, ext) in [(Encoding::Binary, "bin"), (Encoding::Text, "txt")] {
+        let dir = tempfile::tempdir().unwrap();
+        write_colmap(dir.path(), &tiny(), CaptureLayout::ObjectCentred, enc).unwrap();
+        for stem in ["cameras", "images", "points3D"] {
+            let name = format!("{stem}.{ext}");
+            let p = dir.path().join("sparse/0").join(&name);
+            run(&format!("colmap {name}"), &p, &name, &|_| {
+                Scene::load(dir.path(), &LoadOptions::default())
+                    .map(|_| ())
+                    .map_err(err)
+            });
+        }
+    }
+}
+
+#[test]
+fn nerfstudio_transforms() {
+    use ins_scene::data::synthetic::{CaptureLayout, write_transforms};
+    let dir = tempfile::tempdir().unwrap();
+    write_transforms(dir.path(), &tiny(), CaptureLayout::ObjectCentred).unwrap();
+    for name in ["transforms.json", "sparse_pc.ply"] {
+        let p = dir.path().join(name);
+        run(&format!("transforms {name}"), &p, name, &|_| {
+            Scene::load(dir.path(), &LoadOptions::default())
+                .map(|_| ())
+                .map_err(err)
+        });
+    }
+}
+
+#[test]
 fn run_configs() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("config.json");

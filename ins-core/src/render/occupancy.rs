@@ -12,7 +12,7 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use ins_scene::geometry::Vec3;
+use ins_scene::geometry::{Contraction, Vec3};
 use ins_scene::rays::Rays;
 
 /// A density grid with occupancy bits.
@@ -34,6 +34,11 @@ pub struct OccupancyGrid {
     pub threshold: f32,
     /// Decay of the running maximum per update.
     pub decay: f32,
+    /// Unbounded scenes: the grid covers contracted space (`min`/`max` are the contracted
+    /// cube), marching steps lengthen with distance so contracted samples stay evenly spaced,
+    /// and [`OccupancyGrid::field_point`] gives the coordinates the field is queried at.
+    #[serde(default)]
+    pub contraction: Option<Contraction>,
 }
 
 /// Samples produced by marching rays through a grid: only those in occupied cells.
@@ -84,6 +89,24 @@ impl OccupancyGrid {
             step,
             threshold: 0.01,
             decay: 0.95,
+            contraction: None,
+        }
+    }
+
+    /// A grid over the contracted cube of `contraction`, whose field lives in contracted
+    /// coordinates.
+    pub fn contracted(resolution: u32, contraction: Contraction) -> Self {
+        let e = Vec3::splat(contraction.extent());
+        let mut g = Self::new(resolution, -e, e, Self::default_step(resolution, -e, e));
+        g.contraction = Some(contraction);
+        g
+    }
+
+    /// Where the field is evaluated for the scene point `p`: `p` itself, or its contraction.
+    pub fn field_point(&self, p: Vec3) -> Vec3 {
+        match &self.contraction {
+            Some(c) => c.apply(p),
+            None => p,
         }
     }
 
@@ -179,7 +202,8 @@ impl OccupancyGrid {
 
     /// Marches every ray from its `near` to its `far` (clipped to the box) in steps of
     /// [`OccupancyGrid::step`] (divided by the ray direction's length, so non-unit NDC rays
-    /// step evenly), keeping at most `max_per_ray` samples in occupied cells. Each ray's first
+    /// step evenly; lengthened by [`Contraction::step_scale`] in contracted grids), keeping at
+    /// most `max_per_ray` samples in occupied cells. Each ray's first
     /// sample is offset by a uniform fraction of a step drawn from `seed` (`None`: half a step).
     pub fn march(&self, rays: &Rays, max_per_ray: usize, seed: Option<u64>) -> MarchedSamples {
         let bounds = ins_scene::geometry::Bounds::Aabb {
@@ -194,8 +218,10 @@ impl OccupancyGrid {
                 if len <= 0.0 {
                     return Vec::new();
                 }
-                let Some((b0, b1)) = bounds.intersect(o, d) else {
-                    return Vec::new();
+                let (b0, b1) = match (&self.contraction, bounds.intersect(o, d)) {
+                    (Some(_), _) => (0.0, f32::INFINITY),
+                    (None, Some(b)) => b,
+                    (None, None) => return Vec::new(),
                 };
                 let t0 = rays.near[i].max(b0);
                 let t1 = rays.far[i].min(b1);
@@ -209,11 +235,25 @@ impl OccupancyGrid {
                 };
                 let mut out = Vec::new();
                 let mut t = t0 + offset * dt;
-                while t < t1 && out.len() < max_per_ray {
-                    if self.is_occupied(o + d * t) {
-                        out.push((t, dt));
+                match &self.contraction {
+                    None => {
+                        while t < t1 && out.len() < max_per_ray {
+                            if self.is_occupied(o + d * t) {
+                                out.push((t, dt));
+                            }
+                            t += dt;
+                        }
                     }
-                    t += dt;
+                    Some(c) => {
+                        while t < t1 && out.len() < max_per_ray {
+                            let p = o + d * t;
+                            let step = dt * c.step_scale(p);
+                            if self.is_occupied(c.apply(p)) {
+                                out.push((t, step));
+                            }
+                            t += step;
+                        }
+                    }
                 }
                 out
             })
@@ -329,5 +369,36 @@ mod tests {
             "the new cube is not occupied"
         );
         assert_eq!(g.occupied.iter().filter(|&&o| o).count(), 27);
+    }
+
+    #[test]
+    fn contracted_grids_march_to_the_far_background_in_lengthening_steps() {
+        let c = Contraction { radius: 2.0 };
+        let g = OccupancyGrid::contracted(32, c);
+        let mut rays = Rays::default();
+        rays.push(Vec3::new(0.5, 0.0, 0.0), Vec3::X, 0.0, 2000.0);
+        let m = g.march(&rays, usize::MAX, None);
+        // Inside the radius, the grid's step; beyond, steps that keep the contracted spacing.
+        assert!((m.delta[0] - g.step).abs() < 1e-6);
+        let last = m.len() - 1;
+        assert!(
+            m.t[last] > 500.0,
+            "the march reaches the far background: {}",
+            m.t[last]
+        );
+        assert!(m.delta[last] > 100.0 * g.step);
+        // Samples stay evenly spaced in contracted space, and there are few of them.
+        for w in m.t.windows(2).skip(5) {
+            let (a, b) = (
+                c.apply(Vec3::X * (0.5 + w[0])).x,
+                c.apply(Vec3::X * (0.5 + w[1])).x,
+            );
+            assert!((b - a) < 2.0 * g.step, "contracted gap {}", b - a);
+        }
+        assert!(m.len() < 200, "{} samples", m.len());
+        assert!(
+            m.t.iter()
+                .all(|&t| g.field_point(Vec3::X * (0.5 + t)).x < c.extent())
+        );
     }
 }

@@ -8,7 +8,7 @@ use burn::prelude::*;
 use ins_core::imaging::{RgbImage, depth_image};
 use ins_core::loss::{psnr, ssim};
 use ins_scene::camera::Camera;
-use ins_scene::data::{Scene, SceneFormat};
+use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::camera_rays;
 
@@ -63,7 +63,8 @@ impl ViewRender {
     /// Forward-facing scenes render in NDC; their points are mapped back to the world ray.
     pub fn surface_points(&self, scene: &Scene, camera: &Camera) -> Vec<Option<Vec3>> {
         let world = camera_rays(camera, |o, d| scene.ray_range(o, d));
-        let ndc = matches!(scene.format, SceneFormat::Llff)
+        let ndc = scene
+            .forward_facing
             .then(|| RenderRays::for_scene(scene, world.clone()).rays);
         (0..self.opacity.len())
             .map(|i| {

@@ -5,7 +5,7 @@ use burn::prelude::*;
 use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite};
-use ins_scene::data::{Scene, SceneFormat};
+use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{RayBatch, Rays, flatten};
 
@@ -22,7 +22,7 @@ pub struct RenderRays {
 }
 
 impl RenderRays {
-    /// The rays of `rays` as scene `scene` renders them: LLFF scenes in NDC (NeRF's
+    /// The rays of `rays` as scene `scene` renders them: forward-facing scenes in NDC (NeRF's
     /// forward-facing parametrisation, near plane 1), the others as they are.
     pub fn for_scene(scene: &Scene, rays: Rays) -> Self {
         let view_dirs = rays
@@ -30,11 +30,10 @@ impl RenderRays {
             .iter()
             .map(|d| d.normalize_or_zero())
             .collect();
-        let rays = match scene.format {
-            SceneFormat::Llff => match scene.views.first() {
-                Some(v) => rays.to_ndc(v.camera.width, v.camera.height, v.camera.fx, 1.0),
-                None => rays,
-            },
+        let rays = match scene.views.first() {
+            Some(v) if scene.forward_facing => {
+                rays.to_ndc(v.camera.width, v.camera.height, v.camera.fx, 1.0)
+            }
             _ => rays,
         };
         Self { rays, view_dirs }
@@ -69,16 +68,18 @@ impl RenderRays {
     }
 }
 
-/// The box a scene's field covers, `[min xyz, max xyz]`: the scene's bounding volume, or the
-/// NDC box for forward-facing scenes.
+/// The box a scene's field covers, `[min xyz, max xyz]`: the scene's bounding volume, the NDC
+/// box for forward-facing scenes, or the contracted cube of unbounded ones.
 pub fn scene_aabb(scene: &Scene) -> [f32; 6] {
-    match scene.format {
-        SceneFormat::Llff => [-1.5, -1.5, -1.0, 1.5, 1.5, 1.0],
-        _ => {
-            let (min, max) = scene.bounds.aabb();
-            [min.x, min.y, min.z, max.x, max.y, max.z]
-        }
+    if scene.forward_facing {
+        return [-1.5, -1.5, -1.0, 1.5, 1.5, 1.0];
     }
+    if let Some(c) = scene.contraction {
+        let e = c.extent();
+        return [-e, -e, -e, e, e, e];
+    }
+    let (min, max) = scene.bounds.aabb();
+    [min.x, min.y, min.z, max.x, max.y, max.z]
 }
 
 /// How samples are placed along rays.
@@ -182,7 +183,10 @@ fn render_marched(
     let mut x = Vec::with_capacity(n * 3);
     let mut dirs = Vec::with_capacity(n * 3);
     for (&ray, &t) in m.ray.iter().zip(&m.t) {
-        x.extend(rays.rays.point(ray as usize, t).to_array());
+        x.extend(
+            grid.field_point(rays.rays.point(ray as usize, t))
+                .to_array(),
+        );
         dirs.extend(rays.view_dirs[ray as usize].to_array());
     }
     // Padded [R, width] layout: index into the packed samples, N for padding.

@@ -87,7 +87,7 @@ impl Variant for Nerf {
 
     fn resolve(cfg: &mut NerfRunConfig, kind: RunKind, data: &NerfScene) {
         cfg.schedule.steps = match kind {
-            RunKind::Pretrain => cfg.pretrain_steps_for(data.format),
+            RunKind::Pretrain => cfg.pretrain_steps_for(data.scene.forward_facing),
             RunKind::Stylize => cfg.steps_for(kind),
         };
         cfg.schedule.lr = cfg.lr_for(kind);
@@ -150,9 +150,15 @@ impl Variant for Nerf {
     ) -> Result<NerfTask> {
         match start {
             Start::Fresh(data) => {
-                let aabb = scene_aabb(&data.scene);
-                let grid =
-                    (cfg.cim == CimKind::Grid).then(|| fresh_grid(aabb, cfg.occupancy_resolution));
+                if cfg.cim == CimKind::Mlp && data.scene.contraction.is_some() {
+                    bail!(
+                        "{}: an unbounded capture (background past the cameras) renders with \
+                         the grid content module only; drop --cim mlp",
+                        data.scene.root.display()
+                    );
+                }
+                let grid = (cfg.cim == CimKind::Grid)
+                    .then(|| fresh_grid(&data.scene, cfg.occupancy_resolution));
                 let eval = eval_schedule(cfg, &data.scene, folder);
                 Ok(NerfTask::new(
                     data.scene,
@@ -265,8 +271,12 @@ impl Variant for Nerf {
     }
 }
 
-/// A fresh occupancy grid over a model's box.
-pub fn fresh_grid(aabb: [f32; 6], resolution: u32) -> OccupancyGrid {
+/// A fresh occupancy grid over a scene's field box (contracted for unbounded scenes).
+pub fn fresh_grid(scene: &Scene, resolution: u32) -> OccupancyGrid {
+    if let Some(c) = scene.contraction {
+        return OccupancyGrid::contracted(resolution, c);
+    }
+    let aabb = scene_aabb(scene);
     let (min, max) = (
         Vec3::new(aabb[0], aabb[1], aabb[2]),
         Vec3::new(aabb[3], aabb[4], aabb[5]),

@@ -17,7 +17,14 @@ pub fn encode(samples_per_ray: f32, grid: Option<&OccupancyGrid>) -> Vec<u8> {
     match grid {
         None => out.push(0),
         Some(g) => {
-            out.push(1);
+            // Marker 1: a grid over a box; 2: a contracted grid, its radius following.
+            match g.contraction {
+                None => out.push(1),
+                Some(c) => {
+                    out.push(2);
+                    out.extend_from_slice(&c.radius.to_le_bytes());
+                }
+            }
             out.extend_from_slice(&g.resolution.to_le_bytes());
             for v in g
                 .min
@@ -63,7 +70,17 @@ pub fn decode(bytes: &[u8]) -> Result<(f32, Option<OccupancyGrid>)> {
     let spr = r.f32()?;
     let grid = match r.take(1)?[0] {
         0 => None,
-        1 => {
+        marker @ (1 | 2) => {
+            let contraction = if marker == 2 {
+                let radius = r.f32()?;
+                ensure!(
+                    radius.is_finite() && radius > 0.0,
+                    "contraction radius {radius} is not positive"
+                );
+                Some(ins_scene::geometry::Contraction { radius })
+            } else {
+                None
+            };
             let resolution = r.u32()?;
             ensure!(
                 (1..=MAX_RESOLUTION).contains(&resolution),
@@ -90,6 +107,7 @@ pub fn decode(bytes: &[u8]) -> Result<(f32, Option<OccupancyGrid>)> {
                 step: v[6],
                 threshold: v[7],
                 decay: v[8],
+                contraction,
             })
         }
         other => bail!("bad grid marker {other} in the task state"),
@@ -116,5 +134,8 @@ mod tests {
         huge[13..17].copy_from_slice(&100_000u32.to_le_bytes());
         assert!(decode(&huge).is_err());
         assert_eq!(decode(&encode(3.0, None)).unwrap().1, None);
+        // A contracted grid keeps its contraction.
+        let c = OccupancyGrid::contracted(4, ins_scene::geometry::Contraction { radius: 4.0 });
+        assert_eq!(decode(&encode(1.0, Some(&c))).unwrap().1.unwrap(), c);
     }
 }

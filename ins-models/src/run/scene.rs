@@ -20,9 +20,7 @@ pub fn auto_downscale(width: u32, height: u32, max_side: u32) -> u32 {
 pub fn load_scene(path: &Path, downscale: u32) -> Result<(Scene, SceneFormat, u32)> {
     let format = detect_format(path)?;
     let factor = if downscale == 0 {
-        // Peek at the full-size resolution through a cheap load of one split.
-        let probe = Scene::load(path, &LoadOptions::default())?;
-        let (w, h) = probe.resolution();
+        let (w, h) = Scene::probe_resolution(path)?;
         auto_downscale(w, h, DEFAULT_MAX_SIDE)
     } else {
         downscale

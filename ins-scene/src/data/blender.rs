@@ -154,6 +154,8 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         per_ray_range: false,
         to_scene: Similarity::identity(),
         white_background: true,
+        forward_facing: false,
+        contraction: None,
     })
 }
 
@@ -229,27 +231,7 @@ fn read_transforms(path: &Path, dir: &Path) -> Result<(Intrinsics, Vec<Frame>), 
 
 /// The top three rows of a 4×4 (or 3×4) JSON matrix.
 fn matrix_3x4(v: &Value) -> Option<[[f32; 4]; 3]> {
-    let rows = v.as_array()?;
-    if rows.len() != 4 && rows.len() != 3 {
-        return None;
-    }
-    let mut m = [[0.0f32; 4]; 3];
-    for (r, row) in rows.iter().enumerate() {
-        let cols = row.as_array()?;
-        if cols.len() != 4 {
-            return None;
-        }
-        for (c, x) in cols.iter().enumerate() {
-            let x = x.as_f64()? as f32;
-            if !x.is_finite() {
-                return None;
-            }
-            if r < 3 {
-                m[r][c] = x;
-            }
-        }
-    }
-    Some(m)
+    super::transforms::matrix_3x4(v).map(|m| m.map(|r| r.map(|x| x as f32)))
 }
 
 /// `dir/file_path`, with `.png` appended when that file does not exist as written (the NeRF

@@ -49,6 +49,10 @@ pub struct Summary {
     pub camera_distance: [f32; 2],
     /// Scale of the source → scene map.
     pub to_scene_scale: f32,
+    /// How the scene is framed and rendered (NDC, a box, the unit sphere).
+    pub frame: String,
+    /// The first view's lens distortion, when it has one.
+    pub lens: Option<String>,
 }
 
 /// One sanity check: how many items passed.
@@ -101,6 +105,16 @@ pub fn check_scene(scene: &Scene) -> Report {
             checks.push(same_direction(scene));
             checks.push(near_points_in_frame(scene));
         }
+        SceneFormat::Colmap | SceneFormat::Transforms if scene.forward_facing => {
+            checks.push(same_direction(scene));
+            checks.push(near_points_in_frame(scene));
+        }
+        SceneFormat::Colmap | SceneFormat::Transforms => {
+            checks.push(center_in_frame(scene));
+            if scene.has_masks() {
+                checks.push(center_in_masks(scene));
+            }
+        }
     }
     Report {
         summary: summarize(scene),
@@ -146,6 +160,41 @@ pub fn summarize(scene: &Scene) -> Summary {
             .then(|| masked.iter().sum::<f32>() / masked.len() as f32),
         camera_distance: min_max(&dists),
         to_scene_scale: scene.to_scene.scale,
+        frame: describe_frame(scene),
+        lens: first
+            .filter(|c| !c.distortion.is_none())
+            .map(|c| format!("{:?}", c.distortion)),
+    }
+}
+
+/// One line on how the scene is framed: what the renderer will do with it.
+fn describe_frame(scene: &Scene) -> String {
+    if scene.forward_facing {
+        return "forward-facing: rendered in NDC, depth from the near plane to infinity".into();
+    }
+    if let Some(c) = scene.contraction {
+        return format!(
+            "object-centred, unbounded: space within {:.2} of the centre as it is, beyond it \
+             contracted (mip-NeRF 360), rays out to {:.0}",
+            c.radius, scene.far
+        );
+    }
+    match scene.bounds {
+        Bounds::Sphere { radius, .. } => {
+            format!("sphere of radius {radius:.2}, rays clipped to it")
+        }
+        Bounds::Aabb { min, max } => {
+            let half = 0.5 * (max - min).max_element();
+            let clip = if scene.per_ray_range {
+                ", rays clipped to it"
+            } else {
+                ""
+            };
+            format!(
+                "object-centred: box of half side {half:.2} (aabb_scale {:.0}){clip}",
+                half / 1.5
+            )
+        }
     }
 }
 
@@ -277,6 +326,26 @@ fn center_in_masks(scene: &Scene) -> Check {
         "bounding-sphere centre projects inside every mask",
         total - fails.len(),
         total,
+        &fails,
+    )
+}
+
+/// Object-centred captures: the centre the framing chose (what the cameras look at) is in
+/// front of every camera and inside its image.
+fn center_in_frame(scene: &Scene) -> Check {
+    let c = scene.bounds.center();
+    let mut fails = Vec::new();
+    for (i, v) in scene.views.iter().enumerate() {
+        match v.camera.project(c) {
+            Some(p) if v.camera.in_frame(p) => {}
+            Some(p) => fails.push(format!("view {i}: centre at ({:.0}, {:.0})", p[0], p[1])),
+            None => fails.push(format!("view {i}: centre is behind the camera")),
+        }
+    }
+    check(
+        "the scene centre is in frame in every view",
+        scene.views.len() - fails.len(),
+        scene.views.len(),
         &fails,
     )
 }

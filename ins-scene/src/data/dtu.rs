@@ -107,6 +107,7 @@ impl Decomposed {
             cy: (k[1][2] + 0.5) as f32,
             skew: k[0][1] as f32,
             c2w,
+            distortion: Default::default(),
         }
     }
 }
@@ -300,6 +301,8 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         per_ray_range: true,
         to_scene,
         white_background: false,
+        forward_facing: false,
+        contraction: None,
     })
 }
 

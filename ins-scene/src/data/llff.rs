@@ -10,12 +10,11 @@
 use std::path::{Path, PathBuf};
 
 use super::DataError;
+use super::framing::{forward_facing, frustum_bounds};
 use super::images::{list_images, parallel_map, read_image};
 use super::npy::read_npy;
 use super::scene::{LoadOptions, Scene, SceneFormat, View};
 use crate::camera::Camera;
-use crate::geometry::{Bounds, Similarity, Vec3};
-use glam::DVec3;
 
 /// Reads an LLFF scene from `dir`.
 pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
@@ -100,30 +99,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
             format!("depth bounds [{min_bd}, {max_bd}] are not positive and ordered"),
         ));
     }
-    let sc = 1.0 / (min_bd * opts.bd_factor as f64);
-    for p in poses.iter_mut() {
-        for row in p.iter_mut() {
-            row[3] *= sc;
-        }
-    }
-    let avg = average_pose(&poses);
-    let rot_t = [
-        [avg[0][0], avg[1][0], avg[2][0]],
-        [avg[0][1], avg[1][1], avg[2][1]],
-        [avg[0][2], avg[1][2], avg[2][2]],
-    ];
-    let c = [avg[0][3], avg[1][3], avg[2][3]];
-    let recentre = |p: &[[f64; 4]; 3]| -> [[f32; 4]; 3] {
-        let mut out = [[0.0f32; 4]; 3];
-        for r in 0..3 {
-            for col in 0..3 {
-                out[r][col] = (0..3).map(|k| rot_t[r][k] * p[k][col]).sum::<f64>() as f32;
-            }
-            out[r][3] = (0..3).map(|k| rot_t[r][k] * (p[k][3] - c[k])).sum::<f64>() as f32;
-        }
-        out
-    };
-
+    let (framing, sc) = forward_facing(&poses, &bds, opts.bd_factor as f64);
     let mut views = Vec::with_capacity(n);
     for (i, (image, path)) in images.into_iter().zip(files).enumerate() {
         let (h0, w0, f0) = hwf[i];
@@ -134,9 +110,9 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
             (f0 * h as f64 / h0) as f32,
             0.5 * w as f32,
             0.5 * h as f32,
-            recentre(&poses[i]),
+            framing.poses[i],
         );
-        let depth_range = Some(((bds[i].0 * sc) as f32, (bds[i].1 * sc) as f32));
+        let depth_range = framing.depth_ranges[i];
         views.push(View {
             camera,
             image,
@@ -154,13 +130,6 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     };
     let train: Vec<usize> = (0..n).filter(|i| !test.contains(i)).collect();
     let bounds = frustum_bounds(&views);
-    let to_scene = Similarity {
-        scale: sc as f32,
-        rotation: crate::geometry::mat3_from_rows(rot_t.map(|r| r.map(|v| v as f32))),
-        translation: Vec3::from_array(std::array::from_fn(|r| {
-            -(0..3).map(|k| rot_t[r][k] * c[k]).sum::<f64>() as f32
-        })),
-    };
     Ok(Scene {
         name: super::folder_name(dir),
         format: SceneFormat::Llff,
@@ -173,8 +142,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         far: (max_bd * sc) as f32,
         bounds,
         per_ray_range: false,
-        to_scene,
+        to_scene: framing.to_scene,
         white_background: false,
+        forward_facing: true,
+        contraction: None,
     })
 }
 
@@ -214,45 +185,4 @@ fn image_folder(dir: &Path, factor: u32) -> Result<(PathBuf, u32), DataError> {
     }
     best.map(|(_, p)| (p, 1))
         .ok_or_else(|| DataError::missing(&full, "image folder (images/ or images_N/)"))
-}
-
-/// NeRF's `poses_avg`: mean centre, summed back and up axes, re-orthonormalized.
-fn average_pose(poses: &[[[f64; 4]; 3]]) -> [[f64; 4]; 3] {
-    let n = poses.len() as f64;
-    let col = |p: &[[f64; 4]; 3], c: usize| DVec3::new(p[0][c], p[1][c], p[2][c]);
-    let center = poses.iter().map(|p| col(p, 3)).sum::<DVec3>() / n;
-    let back = poses.iter().map(|p| col(p, 2)).sum::<DVec3>();
-    let up = poses.iter().map(|p| col(p, 1)).sum::<DVec3>();
-    let z = back.normalize_or_zero();
-    let x = up.cross(z).normalize_or_zero();
-    let y = z.cross(x).normalize_or_zero();
-    let mut out = [[0.0; 4]; 3];
-    for r in 0..3 {
-        out[r] = [x[r], y[r], z[r], center[r]];
-    }
-    out
-}
-
-/// Box around every view's frustum between its near and far depth bounds: the region the
-/// views actually see.
-fn frustum_bounds(views: &[View]) -> Bounds {
-    let mut min = Vec3::INFINITY;
-    let mut max = Vec3::NEG_INFINITY;
-    for v in views {
-        let c = &v.camera;
-        let (near, far) = v.depth_range.unwrap_or((1.0, 1.0));
-        for depth in [near, far] {
-            for (x, y) in [
-                (0.0, 0.0),
-                (c.width as f32, 0.0),
-                (0.0, c.height as f32),
-                (c.width as f32, c.height as f32),
-            ] {
-                let p = c.origin() + c.rotation() * c.direction_camera(x, y) * depth;
-                min = min.min(p);
-                max = max.max(p);
-            }
-        }
-    }
-    Bounds::Aabb { min, max }
 }

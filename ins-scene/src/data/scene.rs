@@ -10,7 +10,7 @@ use serde::Serialize;
 use super::error::DataError;
 use super::images::{Image, Mask};
 use crate::camera::Camera;
-use crate::geometry::{Bounds, Similarity, Vec3};
+use crate::geometry::{Bounds, Contraction, Similarity, Vec3};
 
 /// The on-disk format a scene was read from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -22,6 +22,11 @@ pub enum SceneFormat {
     Llff,
     /// DTU in the IDR/NeuS layout: `cameras.npz` / `cameras_sphere.npz`, `image/`, `mask/`.
     Dtu,
+    /// A COLMAP workspace: `sparse/0/{cameras,images,points3D}.{bin,txt}` + `images/`.
+    Colmap,
+    /// An instant-ngp / nerfstudio capture: one `transforms.json` (Polycam, Record3D and
+    /// `ns-process-data` write it too).
+    Transforms,
 }
 
 impl fmt::Display for SceneFormat {
@@ -30,6 +35,8 @@ impl fmt::Display for SceneFormat {
             SceneFormat::Blender => "blender",
             SceneFormat::Llff => "llff",
             SceneFormat::Dtu => "dtu",
+            SceneFormat::Colmap => "colmap",
+            SceneFormat::Transforms => "transforms",
         })
     }
 }
@@ -41,8 +48,10 @@ impl FromStr for SceneFormat {
             "blender" | "nerf_synthetic" | "synthetic" => Ok(SceneFormat::Blender),
             "llff" => Ok(SceneFormat::Llff),
             "dtu" | "idr" | "neus" => Ok(SceneFormat::Dtu),
+            "colmap" => Ok(SceneFormat::Colmap),
+            "transforms" | "nerfstudio" | "instant-ngp" | "ngp" => Ok(SceneFormat::Transforms),
             _ => Err(format!(
-                "unknown scene format {s:?} (expected blender, llff or dtu)"
+                "unknown scene format {s:?} (expected blender, llff, dtu, colmap or transforms)"
             )),
         }
     }
@@ -113,12 +122,14 @@ pub struct LoadOptions {
     /// Only these splits' images are read, where the format keeps splits in separate files
     /// (Blender); `None` reads all.
     pub splits: Option<Vec<Split>>,
-    /// LLFF: every `llff_hold`-th view (starting with 0) is held out for test (and val); 0 holds
-    /// none out. Default 8.
+    /// LLFF, COLMAP and transforms.json: every `llff_hold`-th view (starting with 0) is held
+    /// out for test (and val); 0 holds none out. Default 8.
     pub llff_hold: usize,
     /// LLFF: the poses are rescaled so the nearest depth bound becomes `1 / bd_factor`.
     /// Default 0.75.
     pub bd_factor: f32,
+    /// COLMAP: the folder of the images the model names (default `images/` beside `sparse/`).
+    pub image_dir: Option<PathBuf>,
 }
 
 impl Default for LoadOptions {
@@ -128,6 +139,7 @@ impl Default for LoadOptions {
             splits: None,
             llff_hold: 8,
             bd_factor: 0.75,
+            image_dir: None,
         }
     }
 }
@@ -170,6 +182,12 @@ pub struct Scene {
     pub to_scene: Similarity,
     /// Whether images were composited on a white background (Blender).
     pub white_background: bool,
+    /// Forward-facing (LLFF, and captures whose cameras all look one way): rendered in NDC,
+    /// where depth runs from the near plane to infinity.
+    pub forward_facing: bool,
+    /// Unbounded captures (a subject in a room or a street): space beyond [`Scene::bounds`]
+    /// is contracted into a cube the field covers, and rays run out to [`Scene::far`].
+    pub contraction: Option<Contraction>,
 }
 
 impl Scene {

@@ -1,5 +1,5 @@
 //! Small analytic scenes (spheres, boxes, planes, procedural checker textures), ray-cast with
-//! exact depth and masks, and written out in the Blender, LLFF and DTU/IDR formats.
+//! exact depth and masks, and written out in the Blender, LLFF, DTU/IDR, COLMAP and transforms.json formats.
 //!
 //! They prove the geometry: a test writes a scene, reads it back through the real loader, and
 //! checks that the loaded ray of a pixel meets the surface point that was rendered there, at the
@@ -7,7 +7,9 @@
 //! pixel belong to exactly that pixel's ray.
 
 mod analytic;
+mod capture_writers;
 mod writers;
 
 pub use analytic::*;
+pub use capture_writers::*;
 pub use writers::*;

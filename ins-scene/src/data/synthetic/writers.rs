@@ -49,7 +49,12 @@ pub struct SynthView {
 
 impl SynthView {
     /// The view of `camera`, with the depth bounds of its rendering.
-    fn new(camera: Camera, split: Split, image_path: PathBuf, render: Rendering) -> Self {
+    pub(crate) fn new(
+        camera: Camera,
+        split: Split,
+        image_path: PathBuf,
+        render: Rendering,
+    ) -> Self {
         let depth_bounds = z_depth_bounds(&camera, &render);
         SynthView {
             camera,
@@ -75,7 +80,8 @@ pub struct SynthScene {
     pub views: Vec<SynthView>,
 }
 
-/// Writes a small analytic scene in `format` into `dir` (created if needed).
+/// Writes a small analytic scene in `format` into `dir` (created if needed); captures
+/// (COLMAP, transforms.json) are object-centred, COLMAP's binary.
 pub fn write(
     format: SceneFormat,
     dir: &Path,
@@ -85,6 +91,15 @@ pub fn write(
         SceneFormat::Blender => write_blender(dir, opts),
         SceneFormat::Llff => write_llff(dir, opts),
         SceneFormat::Dtu => write_dtu(dir, opts),
+        SceneFormat::Colmap => super::write_colmap(
+            dir,
+            opts,
+            super::CaptureLayout::ObjectCentred,
+            crate::data::colmap_model::Encoding::Binary,
+        ),
+        SceneFormat::Transforms => {
+            super::write_transforms(dir, opts, super::CaptureLayout::ObjectCentred)
+        }
     }
 }
 
@@ -280,6 +295,7 @@ pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErro
             cy,
             skew,
             c2w,
+            distortion: Default::default(),
         };
         let render = scene.render(&camera);
         let image_path = img_dir.join(format!("{i:06}.png"));
