@@ -65,6 +65,13 @@ impl RunFolder {
         self.dir.join("loss_curve.png")
     }
 
+    /// `scene.json`: how the run's scene was read and framed (format, frame, the map from the
+    /// capture's world to the scene frame, bounds), so renders can be placed back in the
+    /// capture's coordinates.
+    pub fn scene_frame(&self) -> PathBuf {
+        self.dir.join("scene.json")
+    }
+
     /// `val/`: pictures of held-out views.
     pub fn val_dir(&self) -> PathBuf {
         self.dir.join("val")

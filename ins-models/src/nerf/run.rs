@@ -159,6 +159,7 @@ impl Variant for Nerf {
                 }
                 let grid = (cfg.cim == CimKind::Grid)
                     .then(|| fresh_grid(&data.scene, cfg.occupancy_resolution));
+                write_scene_frame(&data.scene, &folder.scene_frame())?;
                 let eval = eval_schedule(cfg, &data.scene, folder);
                 Ok(NerfTask::new(
                     data.scene,
@@ -269,6 +270,23 @@ impl Variant for Nerf {
         save_eval_picture(&pictures, &folder.final_picture())?;
         Ok(())
     }
+}
+
+/// Writes `scene.json`: the scene's summary (format, frame, bounds) and the similarity from the
+/// capture's world frame to the scene frame (through a temporary file, so a killed run leaves
+/// the old one or the new one).
+fn write_scene_frame(scene: &Scene, path: &Path) -> Result<()> {
+    let doc = serde_json::json!({
+        "summary": ins_scene::data::check::summarize(scene),
+        "to_scene": scene.to_scene,
+        "forward_facing": scene.forward_facing,
+        "contraction": scene.contraction,
+    });
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, serde_json::to_string_pretty(&doc)?)
+        .with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
 }
 
 /// A fresh occupancy grid over a scene's field box (contracted for unbounded scenes).

@@ -97,31 +97,36 @@ fn object_centred_captures_are_centred_and_scaled_like_nerf_synthetic() {
         .to_scene
         .apply_direction(synth.scene.to_world.rotation * Vec3::Z);
     assert!(up.dot(Vec3::Z) > 0.999, "up {up:?}");
-    assert!(scene.per_ray_range && !scene.white_background);
-    // The sparse points (on the tabletop and its ground) choose the box: they reach past the
-    // unit box, so it grew.
+    assert!(!scene.per_ray_range && !scene.white_background);
+    // The sparse points reach the room's dome, three times farther out than the cameras: space
+    // past the cameras' radius is contracted, and the box is the part left as it is.
+    let c = scene
+        .contraction
+        .expect("a room past the cameras is contracted");
+    assert!((c.radius - 4.0).abs() < 1e-6);
     let (min, max) = scene.bounds.aabb();
-    assert!(
-        max.x > 1.5 && (max + min).length() < 1e-6,
-        "{min:?} {max:?}"
-    );
-    // The box holds 95 % of the sparse points; of the rendered surface (objects and the ground
-    // plane's far reaches), at least 90 %.
-    let (mut inside, mut total) = (0, 0);
+    assert!((max - Vec3::splat(4.0)).length() < 1e-6 && (min + max).length() < 1e-6);
+    assert!(scene.far >= 1000.0 * c.radius);
+    // The objects (the mask) lie inside the uncontracted box; the dome, beyond it.
+    let (mut objects_inside, mut objects, mut far_background) = (0, 0, 0);
     for (v, gt) in scene.views.iter().zip(&synth.views) {
         for (i, &t) in gt.render.depth.iter().enumerate() {
             if t.is_finite() {
                 let (x, y) = (i as u32 % v.camera.width, i as u32 / v.camera.width);
                 let (o, d) = v.camera.pixel_ray(x, y);
-                total += 1;
-                inside += usize::from(scene.bounds.contains(o + d * t * scene.to_scene.scale));
+                let p = o + d * t * scene.to_scene.scale;
+                if gt.render.mask[i] {
+                    objects += 1;
+                    objects_inside += usize::from(scene.bounds.contains(p));
+                } else if !scene.bounds.contains(p) {
+                    far_background += 1;
+                    assert!(c.apply(p).abs().max_element() < c.extent());
+                }
             }
         }
     }
-    assert!(
-        inside * 10 >= total * 9,
-        "{inside} of {total} surface points in the box"
-    );
+    assert!(objects > 0 && objects_inside == objects);
+    assert!(far_background > 0);
 }
 
 #[test]

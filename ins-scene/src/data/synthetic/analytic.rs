@@ -181,6 +181,38 @@ impl AnalyticScene {
         }
     }
 
+    /// The tabletop in a room: its objects on a floor of large tiles, inside a dome of radius 9
+    /// painted in broad checks: a background well past cameras 3 units away, as a capture of
+    /// an object in a room has, coarse enough to be learnt from small images.
+    pub fn room() -> Self {
+        let mut scene = Self::tabletop(false);
+        scene.objects.push(Object {
+            shape: Shape::Plane {
+                point: Vec3::new(0.0, 0.0, -0.55),
+                normal: Vec3::Z,
+            },
+            texture: Texture::Checker {
+                a: Vec3::new(0.35, 0.3, 0.25),
+                b: Vec3::new(0.65, 0.6, 0.5),
+                size: 1.2,
+            },
+            foreground: false,
+        });
+        scene.objects.push(Object {
+            shape: Shape::Sphere {
+                center: Vec3::ZERO,
+                radius: 9.0,
+            },
+            texture: Texture::Checker {
+                a: Vec3::new(0.55, 0.7, 0.9),
+                b: Vec3::new(0.85, 0.85, 0.75),
+                size: 3.0,
+            },
+            foreground: false,
+        });
+        scene
+    }
+
     /// A forward-facing arrangement for LLFF: objects 3–6 units down −z (local), a ground plane
     /// `y = −1.5` and a backdrop `z = −8`, so every ray from near the origin hits something.
     pub fn forward_facing() -> Self {

@@ -24,7 +24,8 @@ use crate::geometry::{Mat3, Similarity, Vec3, mat3_rows};
 /// How the synthetic capture's cameras are placed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CaptureLayout {
-    /// Around a tabletop (with its ground plane as background), at varying heights.
+    /// Around a tabletop in a room ([`AnalyticScene::room`]: floor and walls well past the
+    /// cameras), at varying heights.
     ObjectCentred,
     /// A hand-held grid of cameras looking one way (the LLFF layout).
     ForwardFacing,
@@ -45,7 +46,7 @@ fn capture_cameras(layout: CaptureLayout, opts: &SynthOptions) -> (AnalyticScene
     let n = opts.views.max(1);
     let (mut scene, local): (AnalyticScene, Vec<[[f32; 4]; 3]>) = match layout {
         CaptureLayout::ObjectCentred => (
-            AnalyticScene::tabletop(true),
+            AnalyticScene::room(),
             (0..n)
                 .map(|i| {
                     let az = i as f32 / n as f32 * std::f32::consts::TAU;
