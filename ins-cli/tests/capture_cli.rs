@@ -47,9 +47,9 @@ fn a_capture_with_background_checks_and_trains() {
             "--out",
             s(&scene),
             "--size",
-            "32",
+            "64",
             "--views",
-            "12",
+            "40",
         ];
         args.extend(extra);
         ok(cli(&args));
