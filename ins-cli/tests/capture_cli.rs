@@ -85,6 +85,13 @@ fn a_capture_with_background_checks_and_trains() {
         serde_json::from_str(text.lines().last().expect("a mean line")).unwrap();
     let psnr = mean["psnr"].as_f64().expect("psnr in the mean line");
     assert!(psnr > CAPTURE_PSNR_BAR, "held-out PSNR {psnr} dB: {text}");
+    // A capture that now frames otherwise than when the run trained (here: the record says
+    // another contraction) is refused, not rendered as noise.
+    let mut frame = frame;
+    frame["contraction"]["radius"] = 3.0.into();
+    std::fs::write(run.join("scene.json"), frame.to_string()).unwrap();
+    let o = cli(&["eval", "nerf", "--run", s(&run), "--backend", "flex"]);
+    assert_clean_failure(&o, "framed differently");
 }
 
 #[test]

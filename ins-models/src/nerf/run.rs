@@ -81,6 +81,10 @@ impl Variant for Nerf {
         Ok(NerfScene { scene, format })
     }
 
+    fn check_data(data: &NerfScene, field_run: &RunFolder) -> Result<()> {
+        check_scene_frame(&data.scene, &field_run.scene_frame())
+    }
+
     fn palette(data: &NerfScene, max: usize) -> Vec<[f32; 3]> {
         data.scene.object_colors(ins_scene::data::Split::Train, max)
     }
@@ -286,6 +290,59 @@ fn write_scene_frame(scene: &Scene, path: &Path) -> Result<()> {
     std::fs::write(&tmp, serde_json::to_string_pretty(&doc)?)
         .with_context(|| format!("writing {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Refuses a scene framed otherwise than the `scene.json` its run wrote when it trained (a
+/// capture whose files changed, or whose framing a newer version chooses differently): the
+/// field would be queried in the wrong place and render noise. Runs from before `scene.json`
+/// pass unchecked.
+fn check_scene_frame(scene: &Scene, path: &Path) -> Result<()> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Ok(());
+    };
+    let recorded: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+    let now = serde_json::json!({
+        "to_scene": scene.to_scene,
+        "forward_facing": scene.forward_facing,
+        "contraction": scene.contraction,
+    });
+    let close = |a: &serde_json::Value, b: &serde_json::Value| -> bool {
+        match (a, b) {
+            (serde_json::Value::Number(x), serde_json::Value::Number(y)) => {
+                let (x, y) = (
+                    x.as_f64().unwrap_or(f64::NAN),
+                    y.as_f64().unwrap_or(f64::NAN),
+                );
+                (x - y).abs() <= 1e-4 * x.abs().max(y.abs()).max(1.0)
+            }
+            _ => a == b,
+        }
+    };
+    fn leaves(v: &serde_json::Value, out: &mut Vec<serde_json::Value>) {
+        match v {
+            serde_json::Value::Array(a) => a.iter().for_each(|x| leaves(x, out)),
+            serde_json::Value::Object(o) => o.values().for_each(|x| leaves(x, out)),
+            x => out.push(x.clone()),
+        }
+    }
+    for key in ["to_scene", "forward_facing", "contraction"] {
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        leaves(&recorded[key], &mut a);
+        leaves(&now[key], &mut b);
+        if a.len() != b.len() || a.iter().zip(&b).any(|(x, y)| !close(x, y)) {
+            bail!(
+                "{}: the scene is framed differently now than when this run trained ({key}: {} \
+                 then, {} now; recorded in {}); its files changed, or this version frames such \
+                 captures otherwise: pretrain again",
+                scene.root.display(),
+                recorded[key],
+                now[key],
+                path.display()
+            );
+        }
+    }
     Ok(())
 }
 

@@ -168,6 +168,11 @@ impl<V: Variant> Run<V> {
         };
         let mut scene_cfg = base.clone().unwrap_or_else(|| config.clone());
         let data = V::load_data(&mut scene_cfg)?;
+        let field_run = match V::base_run(&config) {
+            Some(from) if base.is_some() => RunFolder::new(from),
+            _ => RunFolder::new(dir),
+        };
+        V::check_data(&data, &field_run)?;
         let latest = folder
             .checkpoints()
             .latest_dir()?

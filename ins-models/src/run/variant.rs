@@ -55,6 +55,11 @@ pub trait Variant: Sized + 'static {
     /// Loads the data the config names (for a stylized run's config, its base's), writing back
     /// settings chosen from the data (an automatic downscale).
     fn load_data(cfg: &mut Self::Config) -> Result<Self::Data>;
+    /// Checks that data re-read for a run is framed as it was when the run's field was trained
+    /// (`field_run` is the folder of the run that trained it); by default nothing to check.
+    fn check_data(_data: &Self::Data, _field_run: &RunFolder) -> Result<()> {
+        Ok(())
+    }
     /// About `max` colours of the data's training photos, on the object where it has masks
     /// (what colour transfer maps to the painting's palette).
     fn palette(data: &Self::Data, max: usize) -> Vec<[f32; 3]>;

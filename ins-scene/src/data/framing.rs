@@ -24,11 +24,9 @@ pub const CAMERA_RADIUS: f64 = 4.0;
 pub const UNIT_HALF_EXTENT: f64 = 1.5;
 /// Share of the sparse points the chosen box must hold.
 pub const POINT_COVERAGE: f64 = 0.95;
-/// The `aabb_scale` of an object-centred capture without sparse points or a stated one: its
-/// extent is unknown, so it is contracted past the cameras (see [`object_centred`]).
+/// The `aabb_scale` reported for an object-centred capture without sparse points or a stated
+/// one (its space is contracted past the cameras either way, see [`object_centred`]).
 pub const DEFAULT_AABB_SCALE: u32 = 4;
-/// The largest `aabb_scale` kept as a plain box: half side 3, inside the cameras' radius 4.
-pub const MAX_BOX_AABB_SCALE: u32 = 2;
 /// How far rays of a contracted scene run, in contraction radii: the contracted distance left
 /// beyond is 1/1000 of the radius.
 pub const CONTRACTED_FAR: f32 = 1000.0;
@@ -197,10 +195,12 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 /// The frame of an object-centred capture: centred on the [`focus_point`] (the cameras' mean
 /// position when their axes do not meet), the cameras' mean up turned to +z, scaled so the
 /// cameras sit at [`CAMERA_RADIUS`] on average. Its extent: a stated `aabb_scale` is kept as
-/// instant-ngp's box; else the smallest power of two whose box holds [`POINT_COVERAGE`] of the
-/// sparse points, while that box stays within the cameras (`aabb_scale` ≤
-/// [`MAX_BOX_AABB_SCALE`]); past the cameras, or without points to tell, space beyond the
-/// cameras' radius is contracted ([`Contraction`]), as mip-NeRF 360 does.
+/// instant-ngp's box; otherwise space beyond the cameras' radius is contracted
+/// ([`Contraction`]), as mip-NeRF 360 does. A real capture has background past its cameras
+/// (a floor, walls, a backdrop) even where its sparse points do not show it: white tables and
+/// black backdrops give SfM no features (DTU scan37's points all lie within the cameras, and a
+/// box there filled with fog: 11.6 dB held out). The `aabb_scale` the points would need (the
+/// smallest power of two whose box holds [`POINT_COVERAGE`] of them) is reported still.
 pub fn object_centred(poses: &[Pose], points: &[DVec3], aabb_scale: Option<u32>) -> Framing {
     let n = poses.len().max(1) as f64;
     let mean = poses.iter().map(|p| column(p, 3)).sum::<DVec3>() / n;
@@ -252,7 +252,7 @@ pub fn object_centred(poses: &[Pose], points: &[DVec3], aabb_scale: Option<u32>)
         forward_facing: false,
         depth_ranges: vec![None; poses.len()],
         aabb_scale: Some(aabb_scale),
-        contraction: (!stated && aabb_scale > MAX_BOX_AABB_SCALE).then_some(Contraction {
+        contraction: (!stated).then_some(Contraction {
             radius: CAMERA_RADIUS as f32,
         }),
     }

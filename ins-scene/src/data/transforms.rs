@@ -2,7 +2,8 @@
 //! OpenGL axes, intrinsics for the scene or per frame (`fl_x fl_y cx cy w h`, or
 //! `camera_angle_x`), the lens (`camera_model` OPENCV or OPENCV_FISHEYE with `k1 k2 k3 k4 p1
 //! p2`), `file_path` with or without an extension relative to the file, optional `mask_path`,
-//! `aabb_scale` and `ply_file_path` (nerfstudio's sparse points). nerfstudio's `ns-process-data`, Polycam and Record3D exports write it.
+//! `aabb_scale` and `ply_file_path` (nerfstudio's sparse points). Frames are listed by file
+//! name. nerfstudio's `ns-process-data`, Polycam and Record3D exports write it.
 
 use std::path::{Path, PathBuf};
 
@@ -77,6 +78,9 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
             origin: format!("frame {i}"),
         });
     }
+    // In file-name order, as nerfstudio's reader and the COLMAP reader list them (exporters
+    // write frames in registration order), so the held-out views do not depend on it.
+    frames.sort_by(|a, b| a.image.cmp(&b.image));
     // nerfstudio's sparse point cloud places the near plane and the box as COLMAP's does.
     let sparse = match json.get("ply_file_path").and_then(Value::as_str) {
         Some(ply) => {

@@ -3,14 +3,14 @@
 use super::*;
 
 /// Loads `dir` and returns the error message, failing if it loaded.
-fn load_err(dir: &Path) -> String {
+pub(super) fn load_err(dir: &Path) -> String {
     match Scene::load(dir, &LoadOptions::default()) {
         Ok(_) => panic!("{} loaded but should not", dir.display()),
         Err(e) => e.to_string(),
     }
 }
 
-fn assert_names(msg: &str, file: &str) {
+pub(super) fn assert_names(msg: &str, file: &str) {
     assert!(msg.contains(file), "error should name {file}: {msg}");
 }
 
