@@ -286,6 +286,9 @@ fn write_scene_frame(scene: &Scene, path: &Path) -> Result<()> {
         "forward_facing": scene.forward_facing,
         "contraction": scene.contraction,
     });
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let tmp = path.with_extension("json.tmp");
     std::fs::write(&tmp, serde_json::to_string_pretty(&doc)?)
         .with_context(|| format!("writing {}", tmp.display()))?;
