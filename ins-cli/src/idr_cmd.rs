@@ -1,4 +1,4 @@
-//! `ins-cli train idr`, `render idr`, `eval idr` and `export mesh`.
+//! `ins-cli train idr`, `render idr` and `eval idr`.
 
 use std::path::PathBuf;
 
@@ -9,7 +9,6 @@ use ins_core::imaging::RgbImage;
 use ins_core::render::sphere_tracing::TraceOptions;
 use ins_models::config::merge_with_file;
 use ins_models::idr::eval::{evaluate_views, render_camera};
-use ins_models::idr::mesh::extract_mesh;
 use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
 use ins_models::run::RunKind;
 use ins_scene::camera::Camera;
@@ -68,6 +67,9 @@ pub struct RenderIdr {
     /// A camera path: turntable.
     #[arg(long, conflicts_with = "view")]
     path: Option<String>,
+    /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it).
+    #[arg(long, conflicts_with_all = ["view", "path"])]
+    orbit: Option<String>,
     /// Frames of the path.
     #[arg(long, default_value_t = 60)]
     frames: usize,
@@ -109,6 +111,12 @@ pub fn render(a: RenderIdr) -> Result<()> {
             r.image()
         })
     };
+    if let Some(orbit) = &a.orbit {
+        let cam = crate::view_size::orbit_camera(&run.scene(), orbit, size)?;
+        shoot(&cam)?.save(&a.out)?;
+        println!("{}", a.out.display());
+        return Ok(());
+    }
     if let Some(view) = a.view {
         let v = run.scene().views.get(view).with_context(|| {
             format!(
@@ -186,59 +194,6 @@ pub fn eval(a: EvalIdr) -> Result<()> {
             "iou": (evals.iter().map(|e| e.iou).sum::<f64>() / n * 10000.0).round() / 10000.0,
             "psnr_mask": (evals.iter().map(|e| e.psnr_mask).sum::<f64>() / n * 1000.0).round() / 1000.0,
         })
-    );
-    Ok(())
-}
-
-#[derive(Args, Debug)]
-pub struct ExportMesh {
-    /// Run folder written by `train idr`.
-    #[arg(long)]
-    run: PathBuf,
-    /// Samples per axis of the grid marching cubes runs on.
-    #[arg(long, default_value_t = 256)]
-    resolution: usize,
-    /// Style weights for the vertex colours (stylized runs).
-    #[arg(long, value_delimiter = ',')]
-    mix: Option<Vec<f32>>,
-    /// Output .ply.
-    #[arg(long)]
-    out: PathBuf,
-    #[command(flatten)]
-    device: DeviceArgs,
-}
-
-pub fn export_mesh(a: ExportMesh) -> Result<()> {
-    if a.out
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase())
-        .as_deref()
-        != Some("ply")
-    {
-        bail!("{}: meshes are written as .ply", a.out.display());
-    }
-    ins_models::idr::mesh::check_resolution(a.resolution)?;
-    let device = a.device.device();
-    let run = IdrRun::load(&a.run, &device)?;
-    let code = run.code(a.mix.as_deref(), &device)?;
-    let (mesh, colors) = extract_mesh(&run.model.valid(), a.resolution, code, &device)?;
-    if mesh.triangles.is_empty() {
-        bail!(
-            "{}: the SDF has no zero level set inside the unit sphere (nothing to mesh)",
-            a.run.display()
-        );
-    }
-    ins_io::write_atomic_with(&a.out, |tmp| -> Result<()> {
-        let mut f = std::io::BufWriter::new(
-            std::fs::File::create(tmp).with_context(|| format!("writing {}", a.out.display()))?,
-        );
-        mesh.write_ply(&mut f, &colors)
-            .with_context(|| format!("writing {}", a.out.display()))
-    })?;
-    println!(
-        "{}",
-        serde_json::json!({"mesh": a.out, "vertices": mesh.vertices.len(), "triangles": mesh.triangles.len(), "area": mesh.area(), "volume": mesh.volume()})
     );
     Ok(())
 }

@@ -33,6 +33,16 @@ pub fn turntable(
         .collect()
 }
 
+/// The scene's up direction: the mean up vector of its training cameras (zero without any).
+pub fn scene_up(scene: &Scene) -> Vec3 {
+    scene
+        .split(crate::data::Split::Train)
+        .iter()
+        .map(|&i| scene.views[i].camera.up())
+        .sum::<Vec3>()
+        .normalize_or_zero()
+}
+
 /// A turntable fitted to a scene's training cameras: around the bounding volume's centre, with
 /// their mean up vector, mean distance and mean elevation, starting at the first camera's
 /// azimuth. `None` when the scene has no training views.
@@ -44,11 +54,7 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
         .collect();
     let first = cams.first()?;
     let center = scene.bounds.center();
-    let up = cams
-        .iter()
-        .map(|c| c.up())
-        .sum::<Vec3>()
-        .normalize_or_zero();
+    let up = scene_up(scene);
     let mut radius = 0.0;
     let mut elevation = 0.0;
     for c in &cams {
@@ -79,22 +85,12 @@ pub fn spiral(
     let Some(template) = cameras.first() else {
         return Vec::new();
     };
-    let avg = average_pose(cameras);
     let up = cameras
         .iter()
         .map(|c| c.up())
         .sum::<Vec3>()
         .normalize_or_zero();
-    let close = min_depth * 0.9;
-    let inf = max_depth * 5.0;
-    let dt = 0.75;
-    let focal = 1.0 / ((1.0 - dt) / close + dt / inf);
-    let rads: [f32; 3] = std::array::from_fn(|k| {
-        percentile(cameras.iter().map(|c| c.origin()[k].abs()).collect(), 90.0)
-    });
-    let rot = super::geometry::mat3_from_rows(avg.map(|r| [r[0], r[1], r[2]]));
-    let center = Vec3::new(avg[0][3], avg[1][3], avg[2][3]);
-    let focus = center + rot * Vec3::new(0.0, 0.0, -focal);
+    let (center, rot, rads, focus) = spiral_geometry(cameras, min_depth, max_depth);
     (0..n)
         .map(|k| {
             let theta = k as f32 / n as f32 * std::f32::consts::TAU * rots;
@@ -113,6 +109,48 @@ pub fn spiral(
         .collect()
 }
 
+/// The spiral's frame: the average camera's centre and rotation, the radii (90th percentile of
+/// the absolute camera positions along each axis) and the focus point.
+fn spiral_geometry(
+    cameras: &[Camera],
+    min_depth: f32,
+    max_depth: f32,
+) -> (Vec3, Mat3, [f32; 3], Vec3) {
+    let avg = average_pose(cameras);
+    let close = min_depth * 0.9;
+    let inf = max_depth * 5.0;
+    let dt = 0.75;
+    let focal = 1.0 / ((1.0 - dt) / close + dt / inf);
+    let rads: [f32; 3] = std::array::from_fn(|k| {
+        percentile(cameras.iter().map(|c| c.origin()[k].abs()).collect(), 90.0)
+    });
+    let rot = super::geometry::mat3_from_rows(avg.map(|r| [r[0], r[1], r[2]]));
+    let center = Vec3::new(avg[0][3], avg[1][3], avg[2][3]);
+    let focus = center + rot * Vec3::new(0.0, 0.0, -focal);
+    (center, rot, rads, focus)
+}
+
+/// The spiral frame of a scene (all its views, its depth range), as [`spiral_for_scene`] uses
+/// it; `None` without views.
+pub fn spiral_frame(scene: &Scene) -> Option<(Vec3, Mat3, [f32; 3], Vec3)> {
+    let cams: Vec<Camera> = scene.views.iter().map(|v| v.camera.clone()).collect();
+    if cams.is_empty() {
+        return None;
+    }
+    let (lo, hi) = depth_range(scene);
+    Some(spiral_geometry(&cams, lo, hi))
+}
+
+fn depth_range(scene: &Scene) -> (f32, f32) {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for v in &scene.views {
+        let (a, b) = v.depth_range.unwrap_or((scene.near, scene.far));
+        lo = lo.min(a);
+        hi = hi.max(b);
+    }
+    (lo, hi)
+}
+
 /// The LLFF spiral for a scene (all its views, its per-view depth bounds), two turns; `None`
 /// when the scene has no views.
 pub fn spiral_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
@@ -120,12 +158,7 @@ pub fn spiral_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
     if cams.is_empty() {
         return None;
     }
-    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for v in &scene.views {
-        let (a, b) = v.depth_range.unwrap_or((scene.near, scene.far));
-        lo = lo.min(a);
-        hi = hi.max(b);
-    }
+    let (lo, hi) = depth_range(scene);
     Some(spiral(&cams, lo, hi, n, 2.0))
 }
 
@@ -189,7 +222,7 @@ pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
 }
 
 /// Two unit vectors spanning the plane perpendicular to unit vector `up`.
-fn plane_basis(up: Vec3) -> (Vec3, Vec3) {
+pub fn plane_basis(up: Vec3) -> (Vec3, Vec3) {
     let helper = if up.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
     let e1 = up.cross(helper).normalize_or_zero();
     let e2 = up.cross(e1);

@@ -580,3 +580,61 @@ fn area_and_volume_of_a_tetrahedron() {
     assert!((m.volume() - 1.0 / 6.0).abs() < 1e-12);
     assert!((m.area() - (1.5 + 3f64.sqrt() / 2.0)).abs() < 1e-12);
 }
+
+/// A `.glb` read back by the `gltf` crate (which validates it): the same vertices, normals and
+/// triangles, unit normals, the colours back through the sRGB curve, the same volume.
+#[test]
+fn glb_round_trip_through_an_independent_reader() {
+    use crate::mesh::glb::srgb_to_linear;
+    let n = 24;
+    let values = sample(n, -1.0, 1.0, torus);
+    let m = extract(n, &values, 0.0);
+    let colors: Vec<[u8; 3]> = (0..m.vertices.len())
+        .map(|i| [i as u8, (i * 7) as u8, 3])
+        .collect();
+    let mut out = Vec::new();
+    m.write_glb(&mut out, &colors, [0.0, 0.0, 1.0]).unwrap();
+    assert_eq!(out.len() % 4, 0);
+
+    let glb = gltf::Gltf::from_slice(&out).expect("a valid glTF");
+    let blob = glb.blob.as_deref().expect("a BIN chunk");
+    let mesh = glb.meshes().next().expect("a mesh");
+    let prim = mesh.primitives().next().expect("a primitive");
+    assert_eq!(prim.mode(), gltf::mesh::Mode::Triangles);
+    let reader = prim.reader(|_| Some(blob));
+    let pos: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+    let nor: Vec<[f32; 3]> = reader.read_normals().unwrap().collect();
+    let col: Vec<[u16; 4]> = reader.read_colors(0).unwrap().into_rgba_u16().collect();
+    let idx: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
+    assert_eq!(pos, m.vertices);
+    assert_eq!(nor, m.normals);
+    assert_eq!(idx.len(), 3 * m.triangles.len());
+    for n in &nor {
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        assert!((l - 1.0).abs() < 1e-4, "normal length {l}");
+    }
+    for (c, want) in col.iter().zip(&colors) {
+        assert_eq!(c[3], u16::MAX);
+        for k in 0..3 {
+            let lin = c[k] as f32 / 65535.0;
+            assert!(
+                (lin - srgb_to_linear(want[k])).abs() < 1e-4,
+                "{c:?} vs {want:?}"
+            );
+        }
+    }
+    let back = Mesh {
+        vertices: pos,
+        normals: nor,
+        triangles: idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+    };
+    assert!((back.volume() - m.volume()).abs() < 1e-9 * m.volume().abs().max(1.0));
+    assert!(back.volume() > 0.0);
+    // The material is unlit and the node turns the scene's +z to glTF's +y.
+    let mat = glb.materials().next().unwrap();
+    assert!(mat.unlit() && mat.double_sided());
+    let node = glb.nodes().next().unwrap();
+    let (_, r, _) = node.transform().decomposed();
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    assert!((r[0] + s).abs() < 1e-6 && (r[3] - s).abs() < 1e-6, "{r:?}");
+}

@@ -1,7 +1,8 @@
-//! Meshes out of implicit surfaces: marching cubes of a sampled signed distance field, and
-//! binary PLY files any mesh viewer opens.
+//! Meshes out of implicit surfaces: marching cubes of a sampled field, written as binary PLY
+//! or binary glTF.
 
 mod cube_tables;
+pub mod glb;
 pub mod marching_cubes;
 pub mod triangle_mesh;
 

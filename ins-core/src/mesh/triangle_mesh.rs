@@ -48,35 +48,8 @@ impl Mesh {
     /// from `vertices.len()`, if a triangle index is out of range, or if there are
     /// more than `i32::MAX` vertices.
     pub fn write_ply(&self, w: &mut impl Write, colors: &[[u8; 3]]) -> io::Result<()> {
+        self.check(colors, "write_ply")?;
         let nv = self.vertices.len();
-        let invalid = |msg: String| io::Error::new(io::ErrorKind::InvalidInput, msg);
-        if colors.len() != nv {
-            return Err(invalid(format!(
-                "write_ply: {} colors for {} vertices",
-                colors.len(),
-                nv
-            )));
-        }
-        if self.normals.len() != nv {
-            return Err(invalid(format!(
-                "write_ply: {} normals for {} vertices",
-                self.normals.len(),
-                nv
-            )));
-        }
-        if nv > i32::MAX as usize {
-            return Err(invalid(format!("write_ply: too many vertices ({nv})")));
-        }
-        if let Some(t) = self
-            .triangles
-            .iter()
-            .find(|t| t.iter().any(|&i| i as usize >= nv))
-        {
-            return Err(invalid(format!(
-                "write_ply: triangle {t:?} references a vertex >= {nv}"
-            )));
-        }
-
         let header = format!(
             "ply\n\
              format binary_little_endian 1.0\n\
@@ -122,6 +95,38 @@ impl Mesh {
         }
         w.write_all(&buf)?;
         w.flush()
+    }
+
+    /// Checks that `colors` and the normals match the vertices, that triangles index existing
+    /// vertices and that the count fits the formats' 32-bit indices; `what` names the writer.
+    pub(super) fn check(&self, colors: &[[u8; 3]], what: &str) -> io::Result<()> {
+        let nv = self.vertices.len();
+        let invalid = |msg: String| io::Error::new(io::ErrorKind::InvalidInput, msg);
+        if colors.len() != nv {
+            return Err(invalid(format!(
+                "{what}: {} colors for {nv} vertices",
+                colors.len()
+            )));
+        }
+        if self.normals.len() != nv {
+            return Err(invalid(format!(
+                "{what}: {} normals for {nv} vertices",
+                self.normals.len()
+            )));
+        }
+        if nv > i32::MAX as usize {
+            return Err(invalid(format!("{what}: too many vertices ({nv})")));
+        }
+        if let Some(t) = self
+            .triangles
+            .iter()
+            .find(|t| t.iter().any(|&i| i as usize >= nv))
+        {
+            return Err(invalid(format!(
+                "{what}: triangle {t:?} references a vertex >= {nv}"
+            )));
+        }
+        Ok(())
     }
 
     pub(super) fn tri_f64(&self, t: &[u32; 3]) -> [[f64; 3]; 3] {

@@ -135,6 +135,25 @@ impl OccupancyGrid {
         self.cell_of(p).is_some_and(|c| self.occupied[c])
     }
 
+    /// The box of the occupied cells in the grid's coordinates (contracted ones for unbounded
+    /// scenes), `None` when none is occupied.
+    pub fn occupied_bounds(&self) -> Option<(Vec3, Vec3)> {
+        let r = self.resolution as usize;
+        let cell = self.cell_size();
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for (i, _) in self.occupied.iter().enumerate().filter(|(_, o)| **o) {
+            let c = Vec3::new((i % r) as f32, ((i / r) % r) as f32, (i / (r * r)) as f32);
+            lo = lo.min(c);
+            hi = hi.max(c + Vec3::ONE);
+        }
+        lo.x.is_finite().then(|| {
+            (
+                Vec3::from(self.min) + lo * cell,
+                Vec3::from(self.min) + hi * cell,
+            )
+        })
+    }
+
     /// Fraction of occupied cells.
     pub fn occupancy(&self) -> f32 {
         self.occupied.iter().filter(|&&o| o).count() as f32 / self.occupied.len().max(1) as f32
@@ -303,6 +322,13 @@ mod tests {
         assert_eq!(g.occupied.iter().filter(|&&o| o).count(), 27);
         assert!(g.is_occupied(Vec3::splat(0.35)));
         assert!(!g.is_occupied(Vec3::splat(0.75)));
+        // The dense cube [0.2, 0.5)³ fills cells 2..5 of 10 along each axis.
+        let (lo, hi) = g.occupied_bounds().unwrap();
+        assert!((lo - Vec3::splat(0.2)).abs().max_element() < 1e-6, "{lo}");
+        assert!((hi - Vec3::splat(0.5)).abs().max_element() < 1e-6, "{hi}");
+        let mut empty = OccupancyGrid::new(4, Vec3::ZERO, Vec3::ONE, 0.1);
+        empty.occupied.fill(false);
+        assert!(empty.occupied_bounds().is_none());
     }
 
     #[test]
