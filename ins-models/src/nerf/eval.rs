@@ -12,6 +12,7 @@ use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::camera_rays;
 
+use super::early_stop::render_early_stop;
 use super::model::NerfModel;
 use super::render::{RenderRays, Sampling, render};
 
@@ -124,7 +125,7 @@ pub fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> (f64, f64,
 }
 
 /// Renders `rays` (an image's rays, row major) in chunks of [`CHUNK`] with a fixed sampling
-/// (no jitter). `code` is one style code `[1, n_styles]` or `None` for the unstylized field.
+/// (no jitter); marched rays stop once opaque ([`render_early_stop`]). `code` is one style code `[1, n_styles]` or `None` for the unstylized field.
 #[allow(clippy::too_many_arguments)]
 pub fn render_rays(
     model: &NerfModel,
@@ -147,18 +148,34 @@ pub fn render_rays(
     let mut start = 0;
     while start < n {
         let end = (start + CHUNK).min(n);
-        let r = render(
-            model,
-            &rays.slice(start, end),
-            sampling,
-            code.clone(),
-            background,
-            None,
-            device,
-        );
-        out.rgb.extend(to_vec(r.fine.rgb)?);
-        out.depth.extend(to_vec(r.fine.depth)?);
-        out.opacity.extend(to_vec(r.fine.opacity)?);
+        let chunk = rays.slice(start, end);
+        if let Sampling::Occupancy { grid, max_per_ray } = sampling {
+            let (rgb, depth, opacity) = render_early_stop(
+                model,
+                &chunk,
+                grid,
+                max_per_ray,
+                code.clone(),
+                background,
+                device,
+            )?;
+            out.rgb.extend(rgb);
+            out.depth.extend(depth);
+            out.opacity.extend(opacity);
+        } else {
+            let r = render(
+                model,
+                &chunk,
+                sampling,
+                code.clone(),
+                background,
+                None,
+                device,
+            );
+            out.rgb.extend(to_vec(r.fine.rgb)?);
+            out.depth.extend(to_vec(r.fine.depth)?);
+            out.opacity.extend(to_vec(r.fine.opacity)?);
+        }
         start = end;
     }
     Ok(out)

@@ -8,9 +8,12 @@
 //! - [`task`]: the losses of each phase, occupancy refresh, held-out evaluation.
 //! - [`run`]: the NeRF variant of the shared run layer (pretrain, stylize, load).
 //! - [`eval`]: whole-view renders and their PSNR / SSIM.
+//! - [`mesh`]: marching cubes of the density, coloured by the radiance.
 
 pub mod config;
+pub mod early_stop;
 pub mod eval;
+pub mod mesh;
 pub mod model;
 pub mod render;
 pub mod run;
