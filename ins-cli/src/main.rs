@@ -5,6 +5,7 @@ mod bench;
 mod common;
 mod consistency_cmd;
 mod data_cmd;
+mod export_cmd;
 mod idr_cmd;
 mod nerf_cmd;
 mod report_cmd;
@@ -13,7 +14,9 @@ mod siren_cmd;
 mod stylize2d_cmd;
 mod vgg_cmd;
 mod video;
+mod view_cmd;
 mod view_size;
+mod viewer;
 
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser, Subcommand};
 
@@ -48,6 +51,8 @@ enum Command {
         #[command(subcommand)]
         variant: EvalVariant,
     },
+    /// Look around a run in the browser: orbit, zoom, style sliders, depth and normals.
+    View(view_cmd::View),
     /// Export a trained representation (meshes of surfaces).
     Export {
         #[command(subcommand)]
@@ -106,8 +111,8 @@ enum EvalVariant {
 
 #[derive(Subcommand, Debug)]
 enum ExportCommand {
-    /// Marching cubes of an IDR run's surface, vertex-coloured, as a binary PLY.
-    Mesh(idr_cmd::ExportMesh),
+    /// Marching cubes of a NeRF or IDR run's surface, vertex-coloured, as PLY or glTF (.glb).
+    Mesh(export_cmd::ExportMesh),
 }
 
 /// The matches of `train <variant>`, where a variant's flags live (to tell flags given on the
@@ -138,8 +143,9 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
             EvalVariant::Idr(a) => idr_cmd::eval(a),
             EvalVariant::Consistency(a) => consistency_cmd::run(a),
         },
+        Command::View(a) => view_cmd::run(a),
         Command::Export { command } => match command {
-            ExportCommand::Mesh(a) => idr_cmd::export_mesh(a),
+            ExportCommand::Mesh(a) => export_cmd::export_mesh(a),
         },
         Command::Vgg { command } => vgg_cmd::run(command),
         Command::Data { command } => data_cmd::run(command),

@@ -81,6 +81,9 @@ pub struct Cameras {
     /// A camera path: spiral (forward-facing scenes) or turntable (360° scenes).
     #[arg(long)]
     path: Option<String>,
+    /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it).
+    #[arg(long)]
+    orbit: Option<String>,
 }
 
 #[derive(Args, Debug)]
@@ -134,6 +137,12 @@ pub fn render(a: RenderNerf) -> Result<()> {
         Ok(picture(&r, a.depth))
     };
     let c = &a.cameras;
+    if let Some(orbit) = &c.orbit {
+        let cam = crate::view_size::orbit_camera(scene, orbit, size)?;
+        shoot(&cam)?.save(&a.out)?;
+        println!("{}", a.out.display());
+        return Ok(());
+    }
     if let Some(view) = c.view {
         let v = scene
             .views

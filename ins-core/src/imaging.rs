@@ -92,19 +92,33 @@ impl RgbImage {
     /// Saves as PNG (or any format the extension names), atomically: a killed process leaves
     /// the old file or the new one, never half of one.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let bytes: Vec<u8> = self
-            .data
-            .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-            .collect();
-        let img = image::RgbImage::from_raw(self.width as u32, self.height as u32, bytes)
-            .context("image size")?;
+        let img = self.to_rgb8()?;
         let format = image::ImageFormat::from_path(path)
             .with_context(|| format!("{}: unknown image extension", path.display()))?;
         ins_io::write_atomic_with(path, |tmp| {
             img.save_with_format(tmp, format)
                 .with_context(|| format!("writing {}", path.display()))
         })
+    }
+
+    /// 8 bits per channel, rounded.
+    fn to_rgb8(&self) -> Result<image::RgbImage> {
+        let bytes: Vec<u8> = self
+            .data
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
+        image::RgbImage::from_raw(self.width as u32, self.height as u32, bytes)
+            .context("image size")
+    }
+
+    /// The picture as PNG bytes (8 bits per channel, as [`RgbImage::save`] writes it).
+    pub fn encode_png(&self) -> Result<Vec<u8>> {
+        let img = self.to_rgb8()?;
+        let mut out = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut out, image::ImageFormat::Png)
+            .context("encoding a PNG")?;
+        Ok(out.into_inner())
     }
 
     /// Images stacked top to bottom (narrower ones padded with white on the right).

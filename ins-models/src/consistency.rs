@@ -177,6 +177,19 @@ impl PathRender for IdrRun {
     }
 }
 
+/// Loads the run folder `dir` of either 3D variant (told apart by its config).
+pub fn load_path_render(dir: &Path, device: &Device) -> Result<Box<dyn PathRender>> {
+    let config = RunFolder::new(dir).config();
+    Ok(if crate::nerf::NerfRunConfig::from_file(&config).is_ok() {
+        Box::new(NerfRun::load(dir, device)?)
+    } else if crate::idr::IdrRunConfig::from_file(&config).is_ok() {
+        Box::new(IdrRun::load(dir, device)?)
+    } else {
+        // Names the problem (no config, or a SIREN run) through the NeRF loader.
+        Box::new(NerfRun::load(dir, device)?)
+    })
+}
+
 /// A stylized run folder and its pretrained run, of either variant.
 pub struct StylizedPair {
     /// The stylized run.
@@ -188,16 +201,7 @@ pub struct StylizedPair {
 impl StylizedPair {
     /// Loads the stylized run `dir` (NeRF or IDR, told apart by its config) and its base.
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
-        let config = RunFolder::new(dir).config();
-        let student: Box<dyn PathRender> = if crate::nerf::NerfRunConfig::from_file(&config).is_ok()
-        {
-            Box::new(NerfRun::load(dir, device)?)
-        } else if crate::idr::IdrRunConfig::from_file(&config).is_ok() {
-            Box::new(IdrRun::load(dir, device)?)
-        } else {
-            // Names the problem (no config, or a SIREN run) through the NeRF loader.
-            Box::new(NerfRun::load(dir, device)?)
-        };
+        let student = load_path_render(dir, device)?;
         let Some(from) = student.base_run().map(Path::to_path_buf) else {
             bail!(
                 "{} is a pretrained run: view consistency is measured on a stylized run \
@@ -206,12 +210,7 @@ impl StylizedPair {
                 dir.display()
             );
         };
-        let teacher: Box<dyn PathRender> =
-            if crate::nerf::NerfRunConfig::from_file(&RunFolder::new(&from).config()).is_ok() {
-                Box::new(NerfRun::load(&from, device)?)
-            } else {
-                Box::new(IdrRun::load(&from, device)?)
-            };
+        let teacher = load_path_render(&from, device)?;
         let _ = teacher.scene();
         Ok(Self { student, teacher })
     }

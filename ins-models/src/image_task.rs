@@ -40,11 +40,31 @@ pub fn render_image<C: ContentModule>(
     code: &[f32],
     device: &Device,
 ) -> Result<RgbImage> {
-    let coords = pixel_coordinates(w as u32, h as u32).into_flattened();
+    render_window(model, w, h, 0..h, [0.0, 0.0], 1.0, code, device)
+}
+
+/// Rows `rows` of a `w`×`h` view of `model` centred on `center` and magnified `zoom` times
+/// (pixel coordinates `center + c / zoom`, `c` in `[-1, 1]²`): the viewer's pan and zoom.
+#[allow(clippy::too_many_arguments)]
+pub fn render_window<C: ContentModule>(
+    model: &Ins<C>,
+    w: usize,
+    h: usize,
+    rows: std::ops::Range<usize>,
+    center: [f32; 2],
+    zoom: f32,
+    code: &[f32],
+    device: &Device,
+) -> Result<RgbImage> {
+    let all = pixel_coordinates(w as u32, h as u32);
+    let coords: Vec<f32> = all[rows.start * w..rows.end.min(h) * w]
+        .iter()
+        .flat_map(|c| [center[0] + c[0] / zoom, center[1] + c[1] / zoom])
+        .collect();
     let code = Tensor::<2>::from_data(TensorData::new(code.to_vec(), [1, code.len()]), device);
     let chunk = 32768;
-    let mut data = Vec::with_capacity(w * h * 3);
-    let n = w * h;
+    let n = coords.len() / 2;
+    let mut data = Vec::with_capacity(n * 3);
     let mut start = 0;
     while start < n {
         let len = chunk.min(n - start);
@@ -63,7 +83,7 @@ pub fn render_image<C: ContentModule>(
     }
     Ok(RgbImage {
         width: w,
-        height: h,
+        height: n / w.max(1),
         data,
     })
 }

@@ -18,3 +18,4 @@ pub mod mask_sampler;
 pub mod patches;
 pub mod paths;
 pub mod rays;
+pub mod viewpoints;

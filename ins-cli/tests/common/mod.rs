@@ -68,3 +68,22 @@ pub const NERF_TINY: &[&str] = &[
     "--backend",
     "flex",
 ];
+
+/// Writes a `data synth` scene of `format` (`size` pixels, `views` views) to `dir/scene`.
+pub fn synth_scene(dir: &Path, format: &str, size: u32, views: u32) -> std::path::PathBuf {
+    let scene = dir.join("scene");
+    let (size, views) = (size.to_string(), views.to_string());
+    ok(cli(&[
+        "data",
+        "synth",
+        "--format",
+        format,
+        "--out",
+        s(&scene),
+        "--size",
+        &size,
+        "--views",
+        &views,
+    ]));
+    scene
+}

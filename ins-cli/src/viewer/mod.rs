@@ -1,0 +1,3 @@
+//! The pictures `ins-cli view` serves.
+
+pub mod source;
