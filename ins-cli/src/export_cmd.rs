@@ -66,19 +66,44 @@ pub fn export_mesh(a: ExportMesh) -> Result<()> {
             a.out.display()
         ),
     };
-    let config = RunFolder::new(&a.run).config();
     let device = a.device.device();
+    let summary = export(
+        &a.run,
+        a.resolution,
+        a.mix.as_deref(),
+        a.level,
+        format,
+        &a.out,
+        &device,
+    )?;
+    println!("{summary}");
+    Ok(())
+}
+
+/// Extracts the surface of the NeRF or IDR run `run` at `resolution` (colours under `mix`,
+/// NeRF density `level` or the run's own) and writes it to `out` as `format`; returns what the
+/// command prints (counts, area, volume, the level and box for NeRF, seconds).
+pub fn export(
+    run_dir: &Path,
+    resolution: usize,
+    mix: Option<&[f32]>,
+    level: Option<f32>,
+    format: MeshFormat,
+    out: &Path,
+    device: &Device,
+) -> Result<serde_json::Value> {
+    let config = RunFolder::new(run_dir).config();
     let (mesh, colors, up, mut info) = if NerfRunConfig::from_file(&config).is_ok() {
-        let run = NerfRun::load(&a.run, &device)?;
-        let code = run.code(a.mix.as_deref(), &device)?;
+        let run = NerfRun::load(run_dir, device)?;
+        let code = run.code(mix, device)?;
         let started = std::time::Instant::now();
         let m = ins_models::nerf::mesh::extract_mesh(
             &run,
             &run.model.valid(),
-            a.resolution,
-            a.level,
+            resolution,
+            level,
             code,
-            &device,
+            device,
         )?;
         let info = serde_json::json!({
             "level": m.level,
@@ -88,34 +113,34 @@ pub fn export_mesh(a: ExportMesh) -> Result<()> {
         });
         (m.mesh, m.colors, scene_up(run.scene()), info)
     } else if IdrRunConfig::from_file(&config).is_ok() {
-        if a.level.is_some() {
+        if level.is_some() {
             bail!("--level is a NeRF density; an IDR run is meshed at its SDF's zero set");
         }
-        ins_models::idr::mesh::check_resolution(a.resolution)?;
-        let run = IdrRun::load(&a.run, &device)?;
-        let code = run.code(a.mix.as_deref(), &device)?;
+        ins_models::idr::mesh::check_resolution(resolution)?;
+        let run = IdrRun::load(run_dir, device)?;
+        let code = run.code(mix, device)?;
         let started = std::time::Instant::now();
         let (mesh, colors) =
-            ins_models::idr::mesh::extract_mesh(&run.model.valid(), a.resolution, code, &device)?;
+            ins_models::idr::mesh::extract_mesh(&run.model.valid(), resolution, code, device)?;
         let info = serde_json::json!({"seconds": started.elapsed().as_secs_f64()});
         (mesh, colors, scene_up(run.scene()), info)
     } else if config.is_file() {
         bail!(
             "{}: meshes are exported from NeRF and IDR runs (this is neither)",
-            a.run.display()
+            run_dir.display()
         );
     } else {
-        bail!("{} is not a run folder (no config.json)", a.run.display());
+        bail!("{} is not a run folder (no config.json)", run_dir.display());
     };
     if mesh.triangles.is_empty() {
         bail!(
             "{}: the surface is empty at this level (nothing to mesh)",
-            a.run.display()
+            run_dir.display()
         );
     }
-    write_mesh(&mesh, &colors, up.to_array(), format, &a.out)?;
+    write_mesh(&mesh, &colors, up.to_array(), format, out)?;
     let summary = serde_json::json!({
-        "mesh": a.out,
+        "mesh": out,
         "format": format!("{format:?}").to_lowercase(),
         "vertices": mesh.vertices.len(),
         "triangles": mesh.triangles.len(),
@@ -125,8 +150,7 @@ pub fn export_mesh(a: ExportMesh) -> Result<()> {
     if let (Some(info), Some(s)) = (info.as_object_mut(), summary.as_object()) {
         info.extend(s.clone());
     }
-    println!("{info}");
-    Ok(())
+    Ok(info)
 }
 
 /// Writes `mesh` atomically as `format`.

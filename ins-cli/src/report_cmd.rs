@@ -197,10 +197,68 @@ pub fn run(a: Report) -> Result<()> {
             curves.push(name);
         }
     }
-    let html = page(&a.run, &pretrained_run, &summary, &shown, &curves);
+    let mesh = report_mesh(&a.run, &a.out, &a.eval.device.device());
+    if let Err(e) = &mesh {
+        eprintln!("the report shows no mesh: {e}");
+    }
+    let mut html = page(&a.run, &pretrained_run, &summary, &shown, &curves);
+    let at = html.find("<h2>Files</h2>").unwrap_or(html.len());
+    html.insert_str(at, &mesh_section(&mesh));
     ins_io::write_atomic(&a.out.join("index.html"), html.as_bytes())?;
     println!("{}", a.out.join("index.html").display());
     Ok(())
+}
+
+/// Samples along the longest side of the report's mesh: a few megabytes the page embeds.
+const REPORT_MESH_RESOLUTION: usize = 128;
+
+/// Exports the stylized run's surface into the report as `mesh.glb`, and as `mesh.js` (the same
+/// bytes in base64: a page opened from disk may not fetch files); returns the exporter's summary.
+fn report_mesh(run: &Path, out: &Path, device: &burn::prelude::Device) -> Result<Value> {
+    let glb = out.join("mesh.glb");
+    let summary = crate::export_cmd::export(
+        run,
+        REPORT_MESH_RESOLUTION,
+        None,
+        None,
+        crate::export_cmd::MeshFormat::Glb,
+        &glb,
+        device,
+    )?;
+    let bytes = std::fs::read(&glb).with_context(|| format!("reading {}", glb.display()))?;
+    use base64::Engine as _;
+    let js = format!(
+        "window.INS_MESH_GLB=\"{}\";\n",
+        base64::engine::general_purpose::STANDARD.encode(&bytes)
+    );
+    ins_io::write_atomic(&out.join("mesh.js"), js.as_bytes())?;
+    Ok(summary)
+}
+
+/// The 3D view of the mesh (or why there is none).
+fn mesh_section(mesh: &Result<Value>) -> String {
+    let mut h = String::from("<h2>The stylized surface as a mesh</h2>");
+    match mesh {
+        Ok(m) => {
+            let _ = write!(
+                h,
+                "<p>Marching cubes of the stylized run's surface at {REPORT_MESH_RESOLUTION} \
+                 samples along its longest side, coloured by the stylized radiance: {} vertices, \
+                 {} triangles. Drag to turn it. The same file: <a href=\"mesh.glb\">mesh.glb</a> \
+                 (glTF; Blender, three.js, Windows' 3D Viewer).</p>\
+                 <canvas id=\"mesh\" width=\"480\" height=\"480\" data-mesh=\"pending\" \
+                 style=\"border:1px solid #ccc;cursor:grab\"></canvas>\
+                 <script src=\"mesh.js\"></script><script>{}</script>",
+                m["vertices"],
+                m["triangles"],
+                include_str!("report_mesh.js")
+            );
+        }
+        Err(e) => {
+            let _ = write!(h, "<p>No mesh: {}</p>", escape(&format!("{e:#}")));
+        }
+    }
+    h
 }
 
 /// The painting's texture on the object: nearest-neighbour feature distances per layer at the

@@ -124,6 +124,8 @@ fn browser(args: &[&str]) -> std::process::Output {
             "--headless",
             "--no-sandbox",
             "--disable-gpu",
+            // WebGL on the CPU (SwiftShader) for the mesh's 3D view.
+            "--enable-unsafe-swiftshader",
             "--disable-dev-shm-usage",
             "--disable-background-networking",
             "--no-first-run",
@@ -235,6 +237,18 @@ fn consistency_eval_and_report_open_in_a_browser() {
         "images did not all load: {}\n{}",
         dom.chars().take(400).collect::<String>(),
         String::from_utf8_lossy(&o.stderr)
+    );
+    // The mesh's 3D view drew the exported glTF.
+    assert!(report.join("mesh.glb").is_file() && report.join("mesh.js").is_file());
+    assert!(
+        dom.contains("data-mesh=\"ok "),
+        "the 3D view did not draw: {}",
+        dom.split("data-mesh=")
+            .nth(1)
+            .unwrap_or("(no canvas)")
+            .chars()
+            .take(200)
+            .collect::<String>()
     );
     let shot = dir.path().join("shot.png");
     let o = browser(&[
