@@ -126,3 +126,67 @@ fn sfm_refuses_what_it_cannot_pose() {
     let o = cli(&["data", "check", s(&photos), "--no-sheet"]);
     assert_clean_failure(&o, "data sfm");
 }
+
+/// A COLMAP workspace whose photos live elsewhere trains with `--images`; without it the
+/// missing folder is named; other formats refuse the flag.
+#[test]
+fn train_reads_a_colmap_workspaces_photos_from_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("ws");
+    ok(cli(&[
+        "data",
+        "synth",
+        "--format",
+        "colmap",
+        "--out",
+        s(&scene),
+        "--size",
+        "24",
+        "--views",
+        "10",
+    ]));
+    let photos = dir.path().join("photos elsewhere");
+    std::fs::rename(scene.join("images"), &photos).unwrap();
+    let train = |extra: &[&str], out: &str| {
+        let run = dir.path().join(out);
+        let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(NERF_TINY);
+        (cli(&args), run)
+    };
+    let (o, _) = train(&[], "without");
+    assert_clean_failure(&o, "images");
+    let (o, run) = train(&["--images", s(&photos)], "with");
+    ok(o);
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["images"].as_str(), Some(s(&photos)), "{config}");
+    // The run loads again (render) from the recorded folder.
+    let png = dir.path().join("v.png");
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--view",
+        "0",
+        "--out",
+        s(&png),
+    ]));
+    // Other formats name their own photos.
+    let blender = synth_scene(&dir.path().join("b"), "blender", 16, 4);
+    let o = cli(&[
+        "train",
+        "nerf",
+        "--scene",
+        s(&blender),
+        "--images",
+        s(&photos),
+        "--out",
+        s(&dir.path().join("no")),
+        "--steps",
+        "1",
+        "--quiet",
+    ]);
+    assert_clean_failure(&o, "--images is for COLMAP");
+}

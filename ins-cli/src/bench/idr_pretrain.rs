@@ -22,7 +22,7 @@ pub fn run(device: &Device, steps: usize) -> Result<Timing> {
             views: 8,
         },
     )?;
-    let (scene, _) = load_scene(dir.path(), 1, 0, false)?;
+    let (scene, _) = load_scene(dir.path(), 1, None, 0, false)?;
     let mut cfg = IdrRunConfig::default();
     Idr::resolve(&mut cfg, RunKind::Pretrain, &scene);
     let rays = cfg.rays as f64;

@@ -18,7 +18,7 @@ pub fn blender_scene(
 ) -> Result<(tempfile::TempDir, ins_models::nerf::run::NerfScene)> {
     let dir = tempfile::tempdir().context("a temporary folder for the synthetic scene")?;
     write_blender(dir.path(), &SynthOptions { size, views })?;
-    let (scene, format, _) = ins_models::run::scene::load_scene(dir.path(), 1)?;
+    let (scene, format, _) = ins_models::run::scene::load_scene(dir.path(), 1, None)?;
     Ok((dir, ins_models::nerf::run::NerfScene { scene, format }))
 }
 

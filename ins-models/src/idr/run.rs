@@ -38,6 +38,7 @@ pub const BLEND_LR_MULT: f64 = 10.0;
 pub fn load_scene(
     path: &Path,
     downscale: u32,
+    images: Option<&Path>,
     holdout: usize,
     no_mask: bool,
 ) -> Result<(Scene, u32)> {
@@ -48,7 +49,7 @@ pub fn load_scene(
             path.display()
         );
     }
-    let (mut scene, _, factor) = crate::run::scene::load_scene(path, downscale)?;
+    let (mut scene, _, factor) = crate::run::scene::load_scene(path, downscale, images)?;
     if !no_mask && !scene.views.iter().all(|v| v.mask.is_some()) {
         bail!(
             "{}: IDR needs an object mask per view (mask/ folder); pass --no-mask to train without them (colour only on the whole image, a weaker surface)",
@@ -105,7 +106,13 @@ impl Variant for Idr {
             .scene
             .clone()
             .context("pretraining needs --scene DIR")?;
-        let (scene, factor) = load_scene(&path, cfg.source.downscale, cfg.holdout, cfg.no_mask)?;
+        let (scene, factor) = load_scene(
+            &path,
+            cfg.source.downscale,
+            cfg.source.images.as_deref(),
+            cfg.holdout,
+            cfg.no_mask,
+        )?;
         cfg.source.downscale = factor;
         Ok(scene)
     }

@@ -76,7 +76,8 @@ impl Variant for Nerf {
             .scene
             .clone()
             .context("pretraining needs --scene DIR")?;
-        let (scene, format, factor) = load_scene(&path, cfg.source.downscale)?;
+        let (scene, format, factor) =
+            load_scene(&path, cfg.source.downscale, cfg.source.images.as_deref())?;
         cfg.source.downscale = factor;
         Ok(NerfScene { scene, format })
     }

@@ -34,6 +34,9 @@ pub struct SourceArgs {
     /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
     #[arg(long, default_value_t = 0)]
     pub downscale: u32,
+    /// COLMAP workspaces: the photos' folder when it is not `images/` beside the model.
+    #[arg(long, value_name = "DIR")]
+    pub images: Option<PathBuf>,
 }
 
 impl Default for SourceArgs {

@@ -15,10 +15,23 @@ pub fn auto_downscale(width: u32, height: u32, max_side: u32) -> u32 {
 }
 
 /// The scene in `path` at `downscale` (0: the smallest factor that brings the longer side to
-/// at most [`DEFAULT_MAX_SIDE`]), its format and the factor used. A scene without training
-/// views is an error naming the folder.
-pub fn load_scene(path: &Path, downscale: u32) -> Result<(Scene, SceneFormat, u32)> {
+/// at most [`DEFAULT_MAX_SIDE`]), its format and the factor used; `images` names a COLMAP
+/// workspace's photo folder. A scene without training views is an error naming the folder.
+pub fn load_scene(
+    path: &Path,
+    downscale: u32,
+    images: Option<&Path>,
+) -> Result<(Scene, SceneFormat, u32)> {
     let format = detect_format(path)?;
+    if let Some(dir) = images
+        && format != SceneFormat::Colmap
+    {
+        bail!(
+            "--images {}: a {format} scene names its own photos; --images is for COLMAP \
+             workspaces whose photos are not in images/",
+            dir.display()
+        );
+    }
     let factor = if downscale == 0 {
         let (w, h) = Scene::probe_resolution(path)?;
         auto_downscale(w, h, DEFAULT_MAX_SIDE)
@@ -29,6 +42,7 @@ pub fn load_scene(path: &Path, downscale: u32) -> Result<(Scene, SceneFormat, u3
         path,
         &LoadOptions {
             downscale: factor,
+            image_dir: images.map(Path::to_path_buf),
             ..Default::default()
         },
     )?;
