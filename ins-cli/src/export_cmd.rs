@@ -107,6 +107,7 @@ pub fn export(
         )?;
         let info = serde_json::json!({
             "level": m.level,
+            "level_floor": ins_models::nerf::mesh::half_opaque_density(&run),
             "grid": m.resolution,
             "box": [m.bounds.0.to_array(), m.bounds.1.to_array()],
             "seconds": started.elapsed().as_secs_f64(),

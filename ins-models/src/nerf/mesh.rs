@@ -6,7 +6,9 @@
 //! outside the surface depending on how sharp the run's density became. The surface the run
 //! *renders* sits at its expected ray depth, so the level is the median density found at the
 //! rendered surface points of a few training views: the iso-surface then passes where the
-//! renders put the surface.
+//! renders put the surface. A field that renders fog (its rays turn opaque only by adding up
+//! many faint samples) would give a mesh of the fog; the level is then raised to the density
+//! that makes one marching step half opaque.
 
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
@@ -124,6 +126,13 @@ pub fn surface_level(
     Ok(d[d.len() / 2])
 }
 
+/// The density that makes one marching step of the run's occupancy grid half opaque
+/// (`ln 2 / step`); `None` without a grid. A well-trained field's surface level sits just above
+/// it (lego: 62.5 against 59.1): its rays turn opaque within a step or two.
+pub fn half_opaque_density(run: &NerfRun) -> Option<f32> {
+    run.grid().map(|g| std::f32::consts::LN_2 / g.step)
+}
+
 /// The box worth meshing: the occupied cells of the run's occupancy grid (grid variant) within
 /// the scene's bounds, or those bounds; for unbounded scenes, the uncontracted inner cube.
 fn mesh_bounds(run: &NerfRun) -> Result<(Vec3, Vec3)> {
@@ -176,7 +185,20 @@ pub fn extract_mesh(
     let level = match level {
         Some(l) if l.is_finite() && l > 0.0 => l,
         Some(l) => bail!("--level {l}: a density level is positive"),
-        None => surface_level(run, model, code.clone(), device)?,
+        None => {
+            let median = surface_level(run, model, code.clone(), device)?;
+            match half_opaque_density(run) {
+                Some(floor) if median < floor => {
+                    eprintln!(
+                        "the run renders its surfaces as fog (median density {median:.3} where \
+                         its views turn opaque, below {floor:.3}, half opaque over one marching \
+                         step): meshing at {floor:.3}; --level chooses another"
+                    );
+                    floor
+                }
+                _ => median,
+            }
+        }
     };
     let (lo, hi) = mesh_bounds(run)?;
     let ext = hi - lo;
