@@ -224,8 +224,14 @@ fn viewer_in_chromium_and_mesh_export_of_a_stylized_nerf() {
     eprintln!("ply {p}\nglb {g}");
     assert_eq!(g["format"], "glb");
     // The level: the run's own, never below the density that makes a marching step half opaque.
-    let (level, floor) = (p["level"].as_f64().unwrap(), p["level_floor"].as_f64().unwrap());
-    assert!(floor > 0.0 && level >= floor, "level {level}, floor {floor}");
+    let (level, floor) = (
+        p["level"].as_f64().unwrap(),
+        p["level_floor"].as_f64().unwrap(),
+    );
+    assert!(
+        floor > 0.0 && level >= floor,
+        "level {level}, floor {floor}"
+    );
     let (pos, nor, col, idx) = read_glb(&glb);
     assert_eq!(pos.len() as u64, g["vertices"].as_u64().unwrap());
     assert_eq!(idx.len() as u64, 3 * g["triangles"].as_u64().unwrap());
