@@ -307,11 +307,8 @@ impl Viewer {
                 .unwrap_or(60)
                 .clamp(2, 720);
             let scene = run.scene();
-            let cams = match ins_scene::paths::default_kind(scene) {
-                "spiral" => ins_scene::paths::spiral_for_scene(scene, frames),
-                _ => ins_scene::paths::turntable_for_scene(scene, frames),
-            }
-            .context("the scene has no cameras")?;
+            let cams = ins_scene::paths::default_path(scene, frames)
+                .context("the scene has no cameras")?;
             let code = run.code(
                 if req.mix.is_empty() {
                     None

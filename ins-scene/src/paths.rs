@@ -43,16 +43,26 @@ pub fn scene_up(scene: &Scene) -> Vec3 {
         .normalize_or_zero()
 }
 
-/// A turntable fitted to a scene's training cameras: around the bounding volume's centre, with
-/// their mean up vector, mean distance and mean elevation, starting at the first camera's
-/// azimuth. `None` when the scene has no training views.
-pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
+/// How a scene's training cameras circle it: around the bounding volume's centre, their mean up
+/// vector, mean distance and mean elevation (radians), and the first camera's azimuth (radians,
+/// in [`plane_basis`]`(up)`).
+#[derive(Clone, Copy, Debug)]
+pub struct SceneOrbit {
+    pub center: Vec3,
+    pub up: Vec3,
+    pub radius: f32,
+    pub elevation: f32,
+    pub start: f32,
+}
+
+/// The orbit of `scene`'s training cameras and the first of them; `None` without any.
+pub fn scene_orbit(scene: &Scene) -> Option<(SceneOrbit, &Camera)> {
     let cams: Vec<&Camera> = scene
         .split(crate::data::Split::Train)
         .iter()
         .map(|&i| &scene.views[i].camera)
         .collect();
-    let first = cams.first()?;
+    let first = *cams.first()?;
     let center = scene.bounds.center();
     let up = scene_up(scene);
     let mut radius = 0.0;
@@ -67,7 +77,38 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
     let (e1, e2) = plane_basis(up);
     let v = first.origin() - center;
     let start = v.dot(e2).atan2(v.dot(e1));
-    Some(turntable(center, up, radius, elevation, start, n, first))
+    let orbit = SceneOrbit {
+        center,
+        up,
+        radius,
+        elevation,
+        start,
+    };
+    Some((orbit, first))
+}
+
+/// A turntable fitted to a scene's training cameras ([`scene_orbit`]). `None` when the scene
+/// has no training views.
+pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
+    let (o, first) = scene_orbit(scene)?;
+    Some(turntable(
+        o.center,
+        o.up,
+        o.radius,
+        o.elevation,
+        o.start,
+        n,
+        first,
+    ))
+}
+
+/// The path a scene is shown along by default ([`default_kind`]) with `n` frames; `None`
+/// without views.
+pub fn default_path(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
+    match default_kind(scene) {
+        "spiral" => spiral_for_scene(scene, n),
+        _ => turntable_for_scene(scene, n),
+    }
 }
 
 /// The LLFF / NeRF spiral (`render_path_spiral`) around the average of `cameras`: `rots` turns

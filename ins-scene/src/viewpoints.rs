@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use super::camera::{Camera, pose_from_back_up, pose_look_at};
 use super::data::{Scene, Split};
 use super::geometry::{Mat3, Vec3};
-use super::paths::{plane_basis, scene_up, spiral_frame};
+use super::paths::{plane_basis, scene_orbit, scene_up, spiral_frame};
 
 /// A viewer's camera pose.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -86,27 +86,17 @@ impl Viewpoints {
                 fov_x: fov_x(first),
             });
         }
-        let center = scene.bounds.center();
-        let up = scene_up(scene);
+        let (o, _) = scene_orbit(scene)?;
+        let (center, up, radius) = (o.center, o.up, o.radius);
         let plane = plane_basis(up);
-        let (mut radius, mut elevation) = (0.0, 0.0);
-        for &i in train {
-            let v = scene.views[i].camera.origin() - center;
-            radius += v.length();
-            elevation += v.normalize_or_zero().dot(up).clamp(-1.0, 1.0).asin();
-        }
-        radius /= train.len() as f32;
-        elevation /= train.len() as f32;
-        let v = first.origin() - center;
-        let start = v.dot(plane.1).atan2(v.dot(plane.0));
         Some(Self::Orbit {
             center,
             up,
             plane,
             radius,
             home: ViewerPose {
-                azimuth: start.to_degrees(),
-                elevation: elevation.to_degrees(),
+                azimuth: o.start.to_degrees(),
+                elevation: o.elevation.to_degrees(),
                 distance: 1.0,
                 pan: [0.0, 0.0],
             },

@@ -331,4 +331,4 @@ fn fallback_normals(mesh: &mut Mesh) {
 
 #[cfg(test)]
 #[path = "marching_cubes_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -2,6 +2,8 @@
 //! or binary glTF.
 
 mod cube_tables;
+#[cfg(test)]
+mod file_tests;
 pub mod glb;
 pub mod marching_cubes;
 pub mod triangle_mesh;
