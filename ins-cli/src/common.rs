@@ -7,6 +7,7 @@ use anyhow::{Result, bail};
 use burn::prelude::Device;
 use clap::Args;
 use ins_core::backend::BackendChoice;
+use ins_core::train::progress::FirstStep;
 use ins_core::train::{TrainOptions, TrainOutcome};
 use ins_models::run::Variant;
 
@@ -21,9 +22,10 @@ pub struct DeviceArgs {
 }
 
 impl DeviceArgs {
-    /// The device of the chosen backend.
-    pub fn device(&self) -> Device {
-        self.backend.device()
+    /// The device of the chosen backend (for wgpu, an error saying what to do when the machine
+    /// has no adapter).
+    pub fn device(&self) -> Result<Device> {
+        Ok(self.backend.try_device()?)
     }
 }
 
@@ -77,16 +79,25 @@ impl TrainCommand<'_> {
     ) -> Result<TrainOutcome<V::Model>> {
         V::kind(cfg)?;
         let backend = self.device.backend.resolve();
-        let device = backend.device();
+        let device = backend.try_device()?;
+        // A first wgpu run compiles and tunes kernels for minutes: say so until the first step.
+        let first_step = ins_core::gpu::prepared().map(|r| {
+            FirstStep::watch(
+                &r.first_steps_note(),
+                std::time::Duration::from_secs(20),
+                self.run.quiet,
+            )
+        });
         let vgg = if V::style(cfg).styles.is_empty() {
             None
         } else {
             Some(self.vgg.load(&device)?)
         };
         eprintln!("{what} on {backend} into {}", self.out.display());
-        let opts = self
+        let mut opts = self
             .run
             .train_options(self.out, V::seed(cfg), checkpoint_every);
+        opts.first_step = first_step;
         let outcome = ins_models::run::train::<V>(cfg, vgg, &device, opts)?;
         print_summary(self.out, &outcome);
         eprintln!("done in {:.1} s: {next}", outcome.seconds);

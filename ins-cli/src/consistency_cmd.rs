@@ -50,9 +50,15 @@ pub struct EvalConsistency {
     /// Frame size WxH (default: the run's training resolution).
     #[arg(long)]
     pub size: Option<String>,
-    /// Which style of a multi-style run (index into its --style list).
+    /// Which style of a multi-style run (index into its --style list): the painting the frames
+    /// are scored against, and the one they are rendered in unless --mix says otherwise.
     #[arg(long, default_value_t = 0)]
     pub style: usize,
+    /// Render the frames in this mix of a multi-style run's styles (one weight per style, e.g.
+    /// `0.25,0.75`), still scored against --style's painting: how far along a mix the texture
+    /// of each painting goes. Give --out so that runs of several mixes do not overwrite each other.
+    #[arg(long, value_delimiter = ',')]
+    pub mix: Option<Vec<f32>>,
     /// Also stylize the pretrained frames one by one in 2D with the same painting (the per-view
     /// baseline), and score them the same way.
     #[arg(long)]
@@ -129,7 +135,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
         );
     }
     let backend = a.device.backend.resolve();
-    let device = backend.device();
+    let device = backend.try_device()?;
     let pair = StylizedPair::load(&a.run, &device)?;
     let from = pair
         .student
@@ -148,8 +154,14 @@ pub fn run(a: EvalConsistency) -> Result<()> {
         )
     })?;
     let painting = RgbImage::load(painting_path)?;
-    let mut mix = vec![0.0f32; styles.len()];
-    mix[a.style] = 1.0;
+    let mix = match &a.mix {
+        Some(m) => m.clone(),
+        None => {
+            let mut one = vec![0.0f32; styles.len()];
+            one[a.style] = 1.0;
+            one
+        }
+    };
     let code = pair.student.code(Some(&mix), &device)?;
     let vgg = a.vgg.load(&device)?;
     let out = a.out.clone().unwrap_or_else(|| a.run.join("consistency"));
@@ -310,6 +322,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
         "run": a.run,
         "pretrained_run": from,
         "painting": painting_path,
+        "mix": ins_models::style_mix::normalized(styles.len(), Some(&mix))?,
         "path": a.path.as_deref().unwrap_or(pair.default_path()),
         "frames": renders.cameras.len(),
         "size": [w, h],

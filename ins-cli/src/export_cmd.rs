@@ -66,7 +66,7 @@ pub fn export_mesh(a: ExportMesh) -> Result<()> {
             a.out.display()
         ),
     };
-    let device = a.device.device();
+    let device = a.device.device()?;
     let summary = export(
         &a.run,
         a.resolution,

@@ -90,7 +90,7 @@ pub struct RenderIdr {
 }
 
 pub fn render(a: RenderIdr) -> Result<()> {
-    let device = a.device.device();
+    let device = a.device.device()?;
     let run = IdrRun::load(&a.run, &device)?;
     let code = run.code(a.mix.as_deref(), &device)?;
     let size = a.size.as_deref().map(parse_size).transpose()?;
@@ -160,7 +160,7 @@ pub struct EvalIdr {
 }
 
 pub fn eval(a: EvalIdr) -> Result<()> {
-    let device = a.device.device();
+    let device = a.device.device()?;
     let run = IdrRun::load(&a.run, &device)?;
     let views = run.scene().split(ins_scene::data::Split::Val).to_vec();
     if views.is_empty() {

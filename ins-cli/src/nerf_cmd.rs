@@ -117,7 +117,7 @@ fn picture(r: &ViewRender, depth: bool) -> RgbImage {
 }
 
 pub fn render(a: RenderNerf) -> Result<()> {
-    let device = a.device.device();
+    let device = a.device.device()?;
     let run = NerfRun::load(&a.run, &device)?;
     let code = run.code(a.mix.as_deref(), &device)?;
     let size = a.size.as_deref().map(parse_size).transpose()?;
@@ -214,7 +214,7 @@ pub struct EvalNerf {
 }
 
 pub fn eval(a: EvalNerf) -> Result<()> {
-    let device = a.device.device();
+    let device = a.device.device()?;
     let run = NerfRun::load(&a.run, &device)?;
     let scene = &run.scene();
     let views: Vec<usize> = match a.split {

@@ -142,6 +142,7 @@ pub fn run(a: Report) -> Result<()> {
             frames: e.frames,
             size: e.size.clone(),
             style: 0,
+            mix: None,
             baseline2d: e.baseline2d,
             baseline_steps: e.baseline_steps,
             baseline_lr: crate::consistency_cmd::BASELINE_LR,
@@ -197,7 +198,7 @@ pub fn run(a: Report) -> Result<()> {
             curves.push(name);
         }
     }
-    let mesh = report_mesh(&a.run, &a.out, &a.eval.device.device());
+    let mesh = report_mesh(&a.run, &a.out, &a.eval.device.device()?);
     if let Err(e) = &mesh {
         eprintln!("the report shows no mesh: {e}");
     }

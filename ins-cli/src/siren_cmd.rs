@@ -64,6 +64,9 @@ fn demo_input(
 
 pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
     let mut cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
+    // The backend before anything is written: a machine that cannot run it is told so with
+    // the run folder untouched.
+    a.device.device()?;
     let inputs = a.out.join("inputs");
     if cfg.content.is_none() {
         cfg.content = Some(demo_input(&inputs, "demo_content.png", || {
@@ -101,7 +104,7 @@ pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
 }
 
 pub fn render(a: RenderSiren) -> Result<()> {
-    let device = a.device.device();
+    let device = a.device.device()?;
     let run = SirenRun::load(&a.run, &device)?;
     let (w, h) = match &a.size {
         Some(s) => parse_size(s)?,

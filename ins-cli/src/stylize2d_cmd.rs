@@ -115,7 +115,7 @@ pub fn run(a: Stylize2d) -> Result<()> {
     }
     let style = RgbImage::load(&a.style)?;
     let backend = a.device.backend.resolve();
-    let device = backend.device();
+    let device = backend.try_device()?;
     let vgg = a.vgg.load(&device)?;
     let settings = a.settings(&vgg);
     let options = |out: &Path, resume: bool, checkpoint_every: usize| {

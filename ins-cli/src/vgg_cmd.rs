@@ -130,7 +130,7 @@ pub fn run(cmd: VggCommand) -> Result<()> {
             out,
             device,
         } => {
-            let device = device.device();
+            let device = device.device()?;
             let model = vgg.load(&device)?;
             let img = RgbImage::load(&image)?;
             let f = model.features(img.to_tensor(&device));

@@ -41,7 +41,7 @@ pub struct View {
 }
 
 pub fn run(a: View) -> Result<()> {
-    let device = a.device.device();
+    let device = a.device.device()?;
     eprintln!("loading {}", a.run.display());
     let source = Source::load(&a.run, &device)?;
     let server = Server::http((a.host.as_str(), a.port)).map_err(|e| {

@@ -60,14 +60,21 @@ impl BackendChoice {
         }
     }
 
-    /// The device (without autodiff) for this choice.
+    /// The device (without autodiff) for this choice; for wgpu, after setting up its runtime
+    /// ([`crate::gpu::prepare`], caching under `$INS_CACHE_DIR/cubecl`), so that a machine
+    /// without an adapter gets a message saying what to do.
     #[allow(deprecated)]
-    pub fn device(self) -> Device {
-        match self.resolve() {
+    pub fn try_device(self) -> Result<Device, crate::gpu::GpuError> {
+        Ok(match self.resolve() {
             Self::Flex | Self::Auto => Device::flex(),
             Self::Ndarray => Device::ndarray(),
-            Self::Wgpu => Device::wgpu(DeviceKind::DefaultDevice),
-        }
+            Self::Wgpu => crate::gpu::device(&vgg_import::source::cache_dir(None).join("cubecl"))?,
+        })
+    }
+
+    /// [`Self::try_device`] for tests and benchmarks, which stop on the message.
+    pub fn device(self) -> Device {
+        self.try_device().unwrap_or_else(|e| panic!("{e}"))
     }
 }
 
@@ -77,5 +84,10 @@ pub fn hardware_gpu_present() -> bool {
     if std::env::var_os("INS_NO_GPU").is_some() {
         return false;
     }
-    std::panic::catch_unwind(|| !Device::enumerate_physical().is_empty()).unwrap_or(false)
+    // Asks wgpu without opening a device: opening one would fix CubeCL's settings before
+    // `gpu::prepare` could choose them.
+    matches!(
+        crate::gpu::find_adapter(),
+        Ok(crate::gpu::Adapter { kind: crate::gpu::AdapterKind::Hardware, .. })
+    )
 }

@@ -10,6 +10,7 @@
 pub mod backend;
 pub mod contain;
 pub mod eval;
+pub mod gpu;
 mod flex_kernels;
 pub mod imaging;
 pub mod loss;

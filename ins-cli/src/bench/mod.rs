@@ -63,7 +63,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let backend = args.device.backend.resolve();
     let precision = args.precision.unwrap_or(Precision::Bf16.effective());
     for w in &workloads {
-        let device = backend.device().autodiff();
+        let device = backend.try_device()?.autodiff();
         device.seed(42);
         if w == "vgg-layers" {
             vgg_layers::run(&device, &backend.to_string(), args.steps, precision)?;

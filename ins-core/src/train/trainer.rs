@@ -20,7 +20,7 @@ use super::guard::StepValues;
 use super::metrics::MetricsLog;
 use super::phase::{Objective, Phase};
 use super::plot::plot_history;
-use super::progress::Progress;
+use super::progress::{FirstStep, Progress};
 use super::task::{StepContext, Task};
 
 /// Run-level options.
@@ -40,6 +40,9 @@ pub struct TrainOptions {
     pub quiet: bool,
     /// Stop after this many steps in this process (for tests of resume); `None` runs to the end.
     pub stop_after: Option<usize>,
+    /// A wait reported until the first step ends (a first wgpu run compiles and tunes kernels
+    /// for minutes before it).
+    pub first_step: Option<FirstStep>,
 }
 
 impl TrainOptions {
@@ -53,6 +56,7 @@ impl TrainOptions {
             resume: false,
             quiet: false,
             stop_after: None,
+            first_step: None,
         }
     }
 }
@@ -153,6 +157,9 @@ impl<O: Objective> Trainer<O> {
         let total = self.total_steps();
         let start = state.step;
         let progress = Progress::new(total, start, self.opts.quiet);
+        if let Some(first) = &self.opts.first_step {
+            progress.attach(first);
+        }
         let t0 = Instant::now();
         let mut last = BTreeMap::new();
         let mut current_phase = None;
@@ -197,6 +204,9 @@ impl<O: Objective> Trainer<O> {
             // A loss no parameter reaches (an IDR patch whose rays all missed the surface) has
             // nothing to teach: the step is logged and the parameters and Adam stay as they are.
             model = update(model, &mut optim, &groups, phase, lr, &values.total);
+            if let Some(first) = &self.opts.first_step {
+                first.done();
+            }
             let extra = task.after_step(&model, &ctx)?;
             step += 1;
 
@@ -230,6 +240,9 @@ impl<O: Objective> Trainer<O> {
             progress.update(step, status_line(&phase.name, &last));
         }
         progress.finish();
+        if let Some(first) = &self.opts.first_step {
+            first.done();
+        }
         state.step = step;
         if !params_finite(&model) {
             return Err(TrainError::NonFiniteParameters {

@@ -1,0 +1,272 @@
+//! The wgpu backend's runtime, set up once before its first tensor: which adapter it will use
+//! (a clear error when there is none, instead of a panic deep in CubeCL), where CubeCL keeps
+//! its compiled kernels and tuning results, and how much it tunes.
+//!
+//! Why the program chooses CubeCL's settings: by default CubeCL keeps its cache in the
+//! `target/` of the outermost `Cargo.toml` above the working directory (or a user cache folder
+//! when there is none), so where a user's tuning results went depended on where they stood; here
+//! it lives beside the project's other caches. And on a software Vulkan (Mesa's lavapipe, the
+//! only "GPU" of CPU-only machines), compiling each candidate kernel costs seconds, so tuning
+//! is minimal there with one sample per candidate. A `cubecl.toml` (or `burn.toml`) the user
+//! keeps in the working directory or above wins over both.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use burn::prelude::*;
+use cubecl::config::autotune::{AutotuneLevel, BenchConfig};
+use cubecl::config::cache::CacheConfig;
+use cubecl::config::{CubeClRuntimeConfig, RuntimeConfig};
+use cubecl::wgpu::wgpu;
+
+/// How the adapter computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AdapterKind {
+    /// A discrete, integrated or virtual GPU.
+    Hardware,
+    /// A rasterizer running on the CPU (lavapipe, llvmpipe, SwiftShader).
+    Software,
+}
+
+/// The adapter a wgpu device comes up on, as wgpu reports it.
+#[derive(Debug, Clone)]
+pub struct Adapter {
+    /// The adapter's name ("NVIDIA H100", "llvmpipe (LLVM 19.1.7, 256 bits)").
+    pub name: String,
+    /// The graphics API (Vulkan, Metal, Dx12, Gl).
+    pub api: String,
+    /// Hardware or software.
+    pub kind: AdapterKind,
+}
+
+/// The settings a wgpu run computes with.
+#[derive(Debug, Clone)]
+pub struct GpuRuntime {
+    /// The adapter.
+    pub adapter: Adapter,
+    /// Where CubeCL keeps compiled kernels and autotune results (`None`: a user config decides).
+    pub cache: Option<PathBuf>,
+    /// The user's CubeCL config file, when one applies.
+    pub user_config: Option<PathBuf>,
+    /// How kernels are tuned, in words.
+    pub tuning: &'static str,
+}
+
+impl GpuRuntime {
+    /// What a first run on this runtime spends its first minutes on, for a progress line.
+    pub fn first_steps_note(&self) -> String {
+        let cache = match (&self.cache, &self.user_config) {
+            (Some(c), _) => format!("kept in {}", c.display()),
+            (None, Some(f)) => format!("kept where {} says", f.display()),
+            (None, None) => "kept by CubeCL".into(),
+        };
+        let slow = match self.adapter.kind {
+            AdapterKind::Software => {
+                " (a software adapter: minutes the first time, and every step is slow; \
+                 --backend flex is faster on this machine)"
+            }
+            AdapterKind::Hardware => "",
+        };
+        format!(
+            "wgpu on {} ({}): the first steps compile and tune GPU kernels{slow}; tuning {}; \
+             results {cache}, so later runs start faster",
+            self.adapter.name, self.adapter.api, self.tuning
+        )
+    }
+}
+
+/// Why the wgpu backend cannot start.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum GpuError {
+    /// No graphics API reported an adapter.
+    #[error(
+        "--backend wgpu: no GPU adapter found (wgpu asked {apis}); run with --backend flex (the CPU), \
+         or install the GPU's Vulkan driver (on a machine without a GPU, Mesa's lavapipe: the \
+         mesa-vulkan-drivers package)"
+    )]
+    NoAdapter {
+        /// The APIs asked.
+        apis: String,
+    },
+    /// The adapter is there but refused to start.
+    #[error(
+        "--backend wgpu: the {adapter} adapter did not start: {message}; run with --backend flex, \
+         or check the GPU driver"
+    )]
+    Start {
+        /// The adapter's name.
+        adapter: String,
+        /// wgpu's or CubeCL's reason.
+        message: String,
+    },
+}
+
+/// The graphics APIs CubeCL's automatic choice tries on this platform, in its order.
+fn api_chain() -> Vec<wgpu::Backend> {
+    if cfg!(target_os = "macos") {
+        vec![wgpu::Backend::Metal]
+    } else {
+        vec![wgpu::Backend::Vulkan, wgpu::Backend::Dx12, wgpu::Backend::Gl]
+    }
+}
+
+/// The adapter wgpu's high-performance choice takes: the first API of the chain that has one,
+/// and on it a discrete GPU before an integrated, virtual or software one.
+pub fn find_adapter() -> Result<Adapter, GpuError> {
+    let chain = api_chain();
+    for api in &chain {
+        if !wgpu::Instance::enabled_backend_features().contains((*api).into()) {
+            continue;
+        }
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+            backends: (*api).into(),
+            ..wgpu::InstanceDescriptor::new_without_display_handle()
+        });
+        let infos: Vec<wgpu::AdapterInfo> =
+            cubecl::future::block_on(instance.enumerate_adapters((*api).into()))
+                .iter()
+                .map(wgpu::Adapter::get_info)
+                .collect();
+        let rank = |t: wgpu::DeviceType| match t {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Other => 3,
+            wgpu::DeviceType::Cpu => 4,
+        };
+        if let Some(best) = infos.into_iter().min_by_key(|i| rank(i.device_type)) {
+            return Ok(Adapter {
+                kind: if best.device_type == wgpu::DeviceType::Cpu {
+                    AdapterKind::Software
+                } else {
+                    AdapterKind::Hardware
+                },
+                name: best.name,
+                api: format!("{api:?}"),
+            });
+        }
+    }
+    Err(GpuError::NoAdapter {
+        apis: chain
+            .iter()
+            .map(|a| format!("{a:?}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    })
+}
+
+/// The CubeCL config file that applies in `dir` (CubeCL reads the first of these it finds
+/// walking up from the working directory).
+fn user_config_file(dir: &Path) -> Option<PathBuf> {
+    const NAMES: [&str; 4] = ["cubecl.toml", "CubeCL.toml", "burn.toml", "Burn.toml"];
+    dir.ancestors()
+        .flat_map(|d| NAMES.iter().map(move |n| d.join(n)))
+        .find(|p| p.is_file())
+}
+
+/// The settings the program gives CubeCL for `kind`, caching under `cache`.
+fn program_config(kind: AdapterKind, cache: &Path) -> (CubeClRuntimeConfig, &'static str) {
+    // The environment variables CubeCL documents (CUBECL_AUTOTUNE_LEVEL, …) still apply.
+    let mut cfg = CubeClRuntimeConfig::default().override_from_env();
+    cfg.environment.path = CacheConfig::Directory(cache.to_path_buf());
+    let tuning = match kind {
+        AdapterKind::Software => {
+            if std::env::var_os("CUBECL_AUTOTUNE_LEVEL").is_none() {
+                cfg.autotune.level = AutotuneLevel::Minimal;
+            }
+            cfg.autotune.bench = BenchConfig {
+                min_samples: 1,
+                max_samples: 1,
+                short_circuit_samples: 1,
+                ..BenchConfig::default()
+            };
+            "minimal, one sample per candidate (software adapter)"
+        }
+        AdapterKind::Hardware => "CubeCL's default (balanced)",
+    };
+    (cfg, tuning)
+}
+
+static RUNTIME: OnceLock<Result<GpuRuntime, GpuError>> = OnceLock::new();
+
+/// Sets up the wgpu runtime once per process (later calls return the first answer): finds the
+/// adapter, gives CubeCL its settings unless a user config applies, and starts the device so
+/// that a driver that refuses fails here, with its reason.
+pub fn prepare(cache: &Path) -> Result<&'static GpuRuntime, GpuError> {
+    RUNTIME.get_or_init(|| start(cache)).as_ref().map_err(Clone::clone)
+}
+
+/// The runtime set up by [`prepare`], if it was.
+pub fn prepared() -> Option<&'static GpuRuntime> {
+    RUNTIME.get().and_then(|r| r.as_ref().ok())
+}
+
+fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
+    let adapter = find_adapter()?;
+    let user_config = std::env::current_dir()
+        .ok()
+        .and_then(|d| user_config_file(&d));
+    let (cache, tuning) = if user_config.is_some() {
+        (None, "as the user's CubeCL config says")
+    } else {
+        let (cfg, tuning) = program_config(adapter.kind, cache);
+        // `try_set` declines when CubeCL has read its config already (a device opened before
+        // this call): its own settings then stay, which is also what the note says.
+        if CubeClRuntimeConfig::try_set(cfg) {
+            (Some(cache.to_path_buf()), tuning)
+        } else {
+            (None, "CubeCL's (its config was read before this run set one)")
+        }
+    };
+    cubecl::wgpu::try_init_setup::<cubecl::wgpu::AutoGraphicsApi>(
+        &cubecl::wgpu::WgpuDevice::default(),
+        Default::default(),
+    )
+    .map_err(|e| GpuError::Start {
+        adapter: adapter.name.clone(),
+        message: e.to_string(),
+    })?;
+    Ok(GpuRuntime {
+        adapter,
+        cache,
+        user_config,
+        tuning,
+    })
+}
+
+/// The default wgpu device, after [`prepare`].
+#[allow(deprecated)]
+pub fn device(cache: &Path) -> Result<Device, GpuError> {
+    prepare(cache)?;
+    Ok(Device::wgpu(DeviceKind::DefaultDevice))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_user_config_file_above_the_working_directory_is_found() {
+        let dir = tempfile::tempdir().unwrap();
+        let inner = dir.path().join("a/b");
+        std::fs::create_dir_all(&inner).unwrap();
+        assert_eq!(user_config_file(&inner), None);
+        std::fs::write(dir.path().join("a/burn.toml"), "").unwrap();
+        assert_eq!(user_config_file(&inner), Some(dir.path().join("a/burn.toml")));
+        std::fs::write(inner.join("cubecl.toml"), "").unwrap();
+        assert_eq!(user_config_file(&inner), Some(inner.join("cubecl.toml")));
+    }
+
+    #[test]
+    fn software_adapters_tune_with_one_sample_and_the_cache_is_the_one_given() {
+        let cache = Path::new("/some/cache/cubecl");
+        let (soft, _) = program_config(AdapterKind::Software, cache);
+        if std::env::var_os("CUBECL_AUTOTUNE_LEVEL").is_none() {
+            assert!(matches!(soft.autotune.level, AutotuneLevel::Minimal));
+        }
+        assert_eq!(soft.autotune.bench.samples(), (1, 1));
+        assert!(matches!(&soft.environment.path, CacheConfig::Directory(p) if p == cache));
+        let (hard, _) = program_config(AdapterKind::Hardware, cache);
+        assert_eq!(hard.autotune.bench.samples(), BenchConfig::default().samples());
+    }
+}
