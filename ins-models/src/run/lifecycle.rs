@@ -7,7 +7,8 @@ use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{LossWeights, PerceptualLoss};
-use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
+use burn::backend::DispatchDevice;
+use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes, module_bytes};
 use ins_core::train::{RunFolder, TrainError, TrainOptions, TrainOutcome, Trainer};
 use vgg_import::{Preprocess, Vgg};
 
@@ -67,14 +68,20 @@ pub fn train<V: Variant>(
 
     let ad = device.clone().autodiff();
     let seed = V::seed(&cfg);
-    let model = match &start {
-        Start::Fresh(data) => {
-            ins_core::train::seeding::seeded(&ad, seed, || V::new_model(&cfg, data, &ad))
-        }
-        Start::From(base) => ins_core::train::seeding::seeded(&ad, seed, || {
-            V::add_stylizer(base.model.clone().to_device(&ad), &cfg, styles.len(), &ad)
+    let build = |d: &Device| match &start {
+        Start::Fresh(data) => ins_core::train::seeding::seeded(d, seed, || V::new_model(&cfg, data, d)),
+        Start::From(base) => ins_core::train::seeding::seeded(d, seed, || {
+            V::add_stylizer(base.model.clone().to_device(d), &cfg, styles.len(), d)
         }),
     };
+    let mut model = build(&ad);
+    // Each backend has its own random generator: off the CPU, the new parameters are drawn on
+    // flex and copied in, so that a seed gives the same model on wgpu as on flex and their runs
+    // can be compared step by step.
+    if !matches!(device.clone().inner().as_dispatch(), DispatchDevice::Flex(_)) {
+        let drawn = module_bytes(&build(&Device::flex().autodiff()))?;
+        model = load_module_bytes(model, drawn, Path::new("the initial parameters"))?;
+    }
     let (style, preprocess) = if styles.is_empty() {
         (None, Preprocess::Caffe)
     } else {
