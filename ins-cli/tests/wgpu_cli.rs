@@ -47,7 +47,15 @@ fn nerf_trains_on_wgpu_as_on_flex() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene");
     ok(common::cli(&[
-        "data", "synth", "--format", "blender", "--out", s(&scene), "--size", "32", "--views",
+        "data",
+        "synth",
+        "--format",
+        "blender",
+        "--out",
+        s(&scene),
+        "--size",
+        "32",
+        "--views",
         "8",
     ]));
     // The first wgpu run of a fresh machine compiles and tunes every kernel (about 4 minutes
@@ -58,10 +66,29 @@ fn nerf_trains_on_wgpu_as_on_flex() {
         let run = dir.path().join(backend);
         let o = cli_within(
             &[
-                "train", "nerf", "--scene", s(&scene), "--steps", "10", "--eval-every", "0",
-                "--eval-views", "1", "--target-samples", "4096", "--log2-table", "12",
-                "--max-resolution", "64", "--occupancy-resolution", "16", "--backend", backend,
-                "--quiet", "--out", s(&run),
+                "train",
+                "nerf",
+                "--scene",
+                s(&scene),
+                "--steps",
+                "10",
+                "--eval-every",
+                "0",
+                "--eval-views",
+                "1",
+                "--target-samples",
+                "4096",
+                "--log2-table",
+                "12",
+                "--max-resolution",
+                "64",
+                "--occupancy-resolution",
+                "16",
+                "--backend",
+                backend,
+                "--quiet",
+                "--out",
+                s(&run),
             ],
             &[],
             Duration::from_secs(1200),
@@ -86,10 +113,20 @@ fn wgpu_without_an_adapter_says_so_at_once_and_writes_nothing() {
     let out = dir.path().join("run");
     // No Vulkan driver (an ICD list naming a missing file) and no EGL vendor for OpenGL: the
     // machine has no adapter at all, as a container without GPU drivers would.
-    let (icd, egl) = (dir.path().join("no_icd.json"), dir.path().join("no_egl.json"));
+    let (icd, egl) = (
+        dir.path().join("no_icd.json"),
+        dir.path().join("no_egl.json"),
+    );
     let o = cli_within(
         &[
-            "train", "siren", "--backend", "wgpu", "--steps", "2", "--out", s(&out),
+            "train",
+            "siren",
+            "--backend",
+            "wgpu",
+            "--steps",
+            "2",
+            "--out",
+            s(&out),
         ],
         &[
             ("VK_ICD_FILENAMES", icd.as_path()),

@@ -88,6 +88,9 @@ pub fn hardware_gpu_present() -> bool {
     // `gpu::prepare` could choose them.
     matches!(
         crate::gpu::find_adapter(),
-        Ok(crate::gpu::Adapter { kind: crate::gpu::AdapterKind::Hardware, .. })
+        Ok(crate::gpu::Adapter {
+            kind: crate::gpu::AdapterKind::Hardware,
+            ..
+        })
     )
 }

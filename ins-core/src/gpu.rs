@@ -106,7 +106,11 @@ fn api_chain() -> Vec<wgpu::Backend> {
     if cfg!(target_os = "macos") {
         vec![wgpu::Backend::Metal]
     } else {
-        vec![wgpu::Backend::Vulkan, wgpu::Backend::Dx12, wgpu::Backend::Gl]
+        vec![
+            wgpu::Backend::Vulkan,
+            wgpu::Backend::Dx12,
+            wgpu::Backend::Gl,
+        ]
     }
 }
 
@@ -193,7 +197,10 @@ static RUNTIME: OnceLock<Result<GpuRuntime, GpuError>> = OnceLock::new();
 /// adapter, gives CubeCL its settings unless a user config applies, and starts the device so
 /// that a driver that refuses fails here, with its reason.
 pub fn prepare(cache: &Path) -> Result<&'static GpuRuntime, GpuError> {
-    RUNTIME.get_or_init(|| start(cache)).as_ref().map_err(Clone::clone)
+    RUNTIME
+        .get_or_init(|| start(cache))
+        .as_ref()
+        .map_err(Clone::clone)
 }
 
 /// The runtime set up by [`prepare`], if it was.
@@ -215,7 +222,10 @@ fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
         if CubeClRuntimeConfig::try_set(cfg) {
             (Some(cache.to_path_buf()), tuning)
         } else {
-            (None, "CubeCL's (its config was read before this run set one)")
+            (
+                None,
+                "CubeCL's (its config was read before this run set one)",
+            )
         }
     };
     cubecl::wgpu::try_init_setup::<cubecl::wgpu::AutoGraphicsApi>(
@@ -252,7 +262,10 @@ mod tests {
         std::fs::create_dir_all(&inner).unwrap();
         assert_eq!(user_config_file(&inner), None);
         std::fs::write(dir.path().join("a/burn.toml"), "").unwrap();
-        assert_eq!(user_config_file(&inner), Some(dir.path().join("a/burn.toml")));
+        assert_eq!(
+            user_config_file(&inner),
+            Some(dir.path().join("a/burn.toml"))
+        );
         std::fs::write(inner.join("cubecl.toml"), "").unwrap();
         assert_eq!(user_config_file(&inner), Some(inner.join("cubecl.toml")));
     }
@@ -267,6 +280,9 @@ mod tests {
         assert_eq!(soft.autotune.bench.samples(), (1, 1));
         assert!(matches!(&soft.environment.path, CacheConfig::Directory(p) if p == cache));
         let (hard, _) = program_config(AdapterKind::Hardware, cache);
-        assert_eq!(hard.autotune.bench.samples(), BenchConfig::default().samples());
+        assert_eq!(
+            hard.autotune.bench.samples(),
+            BenchConfig::default().samples()
+        );
     }
 }

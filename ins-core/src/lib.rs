@@ -10,8 +10,8 @@
 pub mod backend;
 pub mod contain;
 pub mod eval;
-pub mod gpu;
 mod flex_kernels;
+pub mod gpu;
 pub mod imaging;
 pub mod loss;
 pub mod mesh;

@@ -149,7 +149,10 @@ mod tests {
         // The reporter wakes and ends at once: its thread holds the only other handle.
         let started = Instant::now();
         while Arc::strong_count(&first.inner) > 1 {
-            assert!(started.elapsed() < Duration::from_secs(2), "the reporter did not end");
+            assert!(
+                started.elapsed() < Duration::from_secs(2),
+                "the reporter did not end"
+            );
             std::thread::sleep(Duration::from_millis(5));
         }
     }

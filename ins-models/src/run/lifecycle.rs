@@ -4,10 +4,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use burn::backend::DispatchDevice;
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{LossWeights, PerceptualLoss};
-use burn::backend::DispatchDevice;
 use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes, module_bytes};
 use ins_core::train::{RunFolder, TrainError, TrainOptions, TrainOutcome, Trainer};
 use vgg_import::{Preprocess, Vgg};
@@ -69,7 +69,9 @@ pub fn train<V: Variant>(
     let ad = device.clone().autodiff();
     let seed = V::seed(&cfg);
     let build = |d: &Device| match &start {
-        Start::Fresh(data) => ins_core::train::seeding::seeded(d, seed, || V::new_model(&cfg, data, d)),
+        Start::Fresh(data) => {
+            ins_core::train::seeding::seeded(d, seed, || V::new_model(&cfg, data, d))
+        }
         Start::From(base) => ins_core::train::seeding::seeded(d, seed, || {
             V::add_stylizer(base.model.clone().to_device(d), &cfg, styles.len(), d)
         }),
@@ -78,7 +80,10 @@ pub fn train<V: Variant>(
     // Each backend has its own random generator: off the CPU, the new parameters are drawn on
     // flex and copied in, so that a seed gives the same model on wgpu as on flex and their runs
     // can be compared step by step.
-    if !matches!(device.clone().inner().as_dispatch(), DispatchDevice::Flex(_)) {
+    if !matches!(
+        device.clone().inner().as_dispatch(),
+        DispatchDevice::Flex(_)
+    ) {
         let drawn = module_bytes(&build(&Device::flex().autodiff()))?;
         model = load_module_bytes(model, drawn, Path::new("the initial parameters"))?;
     }
