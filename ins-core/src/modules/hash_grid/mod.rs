@@ -2,9 +2,13 @@
 //! by trilinear interpolation at geometrically growing resolutions.
 //!
 //! - [`kernel`]: the maths on slices (forward, both backwards, the spatial Jacobian).
-//! - [`op`]: a Burn op with a hand-written backward that runs the kernel on Flex and NdArray.
-//! - [`reference`]: the same function from ordinary Burn ops (wgpu, and the tests' yardstick).
+//! - [`cube`]: the same maths as CubeCL kernels for the GPU backends.
+//! - [`op`]: a Burn op with a hand-written backward that runs the kernels on Flex, NdArray and
+//!   the CubeCL backends.
+//! - [`reference`]: the same function from ordinary Burn ops (the tests' yardstick, and any
+//!   backend without the op).
 
+pub mod cube;
 pub mod kernel;
 pub mod op;
 pub mod reference;

@@ -1,10 +1,11 @@
-//! The hash encoding as a Burn op with a hand-written backward, running the plain-Rust kernels
-//! of [`super::kernel`] on the CPU backends (Flex, NdArray) and under autodiff.
+//! The hash encoding as a Burn op with a hand-written backward: the plain-Rust kernels of
+//! [`super::kernel`] on the CPU backends (Flex, NdArray), the CubeCL kernels of [`super::cube`]
+//! on the GPU ones (through Fusion, as an opaque operation), and under autodiff.
 //!
 //! Through ordinary Burn ops the encoding is 8·L gathers per point, each with a scatter-add in
 //! backward that Flex runs as a sequential loop; the kernel does a point's whole encoding in
-//! one pass and accumulates the table gradient level by level in parallel. Other backends
-//! (wgpu) use [`super::reference`], built from ordinary differentiable ops.
+//! one pass and accumulates the table gradient level by level in parallel. Backends without
+//! the op (LibTorch, Remote) use [`super::reference`], built from ordinary differentiable ops.
 
 #![allow(deprecated)]
 
@@ -16,17 +17,22 @@ use burn::backend::flex::FlexTensor;
 use burn::backend::ops::FloatTensorOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
-    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, NdArray, TensorData,
-    TensorMetadata, backend_extension, read_sync,
+    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, NdArray, Shape,
+    TensorData, TensorMetadata, backend_extension, read_sync,
 };
 use burn::prelude::*;
 
+use burn_cubecl::CubeBackend;
+use burn_cubecl::tensor::CubeTensor;
+
+use super::cube;
 use super::kernel::{self, GridShape};
 
 /// The hash encoding's forward, backward and Jacobian as backend operations.
-#[backend_extension(Flex, NdArray, Autodiff)]
+#[backend_extension(Flex, NdArray, Cube, Fusion, Autodiff)]
 pub trait HashGridOps: Backend {
     /// `positions [N, 3]` in `[0, 1]`, `table [R, F]` → `[N, L·F]`.
+    #[fusion(dtype = positions, shape = Shape::new([positions[0], shape.d_out()]))]
     fn hash_grid_forward(
         positions: FloatTensor<Self>,
         table: FloatTensor<Self>,
@@ -34,6 +40,7 @@ pub trait HashGridOps: Backend {
     ) -> FloatTensor<Self>;
 
     /// `∂L/∂table` (`[R, F]`) for upstream `grad_out [N, L·F]`.
+    #[fusion(dtype = positions, shape = table_shape(shape))]
     fn hash_grid_backward_table(
         positions: FloatTensor<Self>,
         grad_out: FloatTensor<Self>,
@@ -41,6 +48,7 @@ pub trait HashGridOps: Backend {
     ) -> FloatTensor<Self>;
 
     /// `∂L/∂positions` (`[N, 3]`) for upstream `grad_out [N, L·F]`.
+    #[fusion(dtype = positions, shape = positions)]
     fn hash_grid_backward_positions(
         positions: FloatTensor<Self>,
         table: FloatTensor<Self>,
@@ -49,6 +57,7 @@ pub trait HashGridOps: Backend {
     ) -> FloatTensor<Self>;
 
     /// The spatial Jacobian `[N, L·F, 3]`.
+    #[fusion(dtype = positions, shape = Shape::new([positions[0], shape.d_out(), 3]))]
     fn hash_grid_jacobian(
         positions: FloatTensor<Self>,
         table: FloatTensor<Self>,
@@ -56,11 +65,17 @@ pub trait HashGridOps: Backend {
     ) -> FloatTensor<Self>;
 
     /// `∂L/∂table` for upstream `grad_jac [N, L·F, 3]` of the Jacobian.
+    #[fusion(dtype = positions, shape = table_shape(shape))]
     fn hash_grid_jacobian_backward_table(
         positions: FloatTensor<Self>,
         grad_jac: FloatTensor<Self>,
         shape: GridShape,
     ) -> FloatTensor<Self>;
+}
+
+/// The table's shape `[R, F]`, for Fusion to describe a table gradient before it runs.
+fn table_shape(shape: &GridShape) -> Shape {
+    Shape::new([shape.layout().total_rows(), shape.features as usize])
 }
 
 /// Runs `f` on the f32 values of a Flex tensor, without a copy when it is contiguous.
@@ -238,6 +253,45 @@ impl HashGridOps for NdArray {
     }
 }
 
+impl HashGridOps for CubeBackend {
+    fn hash_grid_forward(positions: CubeTensor, table: CubeTensor, shape: GridShape) -> CubeTensor {
+        cube::forward(positions, table, shape)
+    }
+
+    fn hash_grid_backward_table(
+        positions: CubeTensor,
+        grad_out: CubeTensor,
+        shape: GridShape,
+    ) -> CubeTensor {
+        cube::backward_table(positions, grad_out, shape)
+    }
+
+    fn hash_grid_backward_positions(
+        positions: CubeTensor,
+        table: CubeTensor,
+        grad_out: CubeTensor,
+        shape: GridShape,
+    ) -> CubeTensor {
+        cube::backward_positions(positions, table, grad_out, shape)
+    }
+
+    fn hash_grid_jacobian(
+        positions: CubeTensor,
+        table: CubeTensor,
+        shape: GridShape,
+    ) -> CubeTensor {
+        cube::jacobian(positions, table, shape)
+    }
+
+    fn hash_grid_jacobian_backward_table(
+        positions: CubeTensor,
+        grad_jac: CubeTensor,
+        shape: GridShape,
+    ) -> CubeTensor {
+        cube::jacobian_backward_table(positions, grad_jac, shape)
+    }
+}
+
 #[derive(Debug)]
 struct EncodeBackward;
 
@@ -365,11 +419,12 @@ impl<B: Backend + HashGridOps, C: CheckpointStrategy> HashGridOps for Autodiff<B
     }
 }
 
-/// Whether the kernels run on this device (Flex or NdArray, with or without autodiff).
+/// Whether the kernels run on this device (Flex, NdArray or a CubeCL runtime, with or without
+/// autodiff).
 pub fn kernel_device(device: &Device) -> bool {
     matches!(
         device.clone().inner().as_dispatch(),
-        DispatchDevice::Flex(_) | DispatchDevice::NdArray(_)
+        DispatchDevice::Flex(_) | DispatchDevice::NdArray(_) | DispatchDevice::Cube(_)
     )
 }
 
