@@ -17,7 +17,9 @@ pub fn run(device: &Device, steps: usize, kernel: bool) -> Result<Timing> {
     let x = Tensor::<2>::random([POINTS, 3], Distribution::Uniform(0.0, 1.0), device);
     let g = Tensor::<2>::random([POINTS, grid.d_out()], Distribution::Default, device);
     if kernel && !op::kernel_device(device) {
-        bail!("the hash-grid kernel runs on flex and ndarray only (this is {device:?})");
+        bail!(
+            "the hash-grid kernel runs on flex, ndarray and the CubeCL backends (wgpu) only (this is {device:?})"
+        );
     }
     let times = timed(steps, || {
         let t = grid.table.val();

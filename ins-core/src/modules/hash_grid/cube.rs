@@ -52,6 +52,32 @@ fn fraction(p: f32, res: u32, i: u32) -> f32 {
     f32::clamp(p, 0.0, 1.0) * f32::cast_from(res) - f32::cast_from(i)
 }
 
+/// Where a point falls in one level: its cell's lower corner and the fractions within it.
+#[derive(CubeType)]
+struct Cell {
+    ix: u32,
+    iy: u32,
+    iz: u32,
+    fx: f32,
+    fy: f32,
+    fz: f32,
+}
+
+/// The cell of point `p` at resolution `res`.
+#[cube]
+fn cell(positions: &[f32], p: usize, res: u32) -> Cell {
+    let (px, py, pz) = (positions[p * 3], positions[p * 3 + 1], positions[p * 3 + 2]);
+    let (ix, iy, iz) = (lower(px, res), lower(py, res), lower(pz, res));
+    Cell {
+        ix,
+        iy,
+        iz,
+        fx: fraction(px, res, ix),
+        fy: fraction(py, res, iy),
+        fz: fraction(pz, res, iz),
+    }
+}
+
 /// A corner's interpolation factor along one axis: `f` on the upper side, `1 − f` below.
 #[cube]
 fn factor(bit: u32, f: f32) -> f32 {
@@ -82,13 +108,13 @@ fn inside(p: f32) -> f32 {
     v
 }
 
-/// Table row of corner `c` (bits x, y, z) of the cell with lower corner `(ix, iy, iz)` in
-/// level `l`; the same row as [`Layout::row`].
+/// Table row of corner `c` (bits x, y, z) of cell `k` in level `l`; the same row as
+/// [`Layout::row`].
 #[cube]
-fn corner_row(levels: &[u32], l: usize, ix: u32, iy: u32, iz: u32, c: u32) -> usize {
-    let x = ix + (c & 1);
-    let y = iy + ((c >> 1) & 1);
-    let z = iz + ((c >> 2) & 1);
+fn corner_row(levels: &[u32], l: usize, k: &Cell, c: u32) -> usize {
+    let x = k.ix + (c & 1);
+    let y = k.iy + ((c >> 1) & 1);
+    let z = k.iz + ((c >> 2) & 1);
     let res = levels[l * 4];
     let mut local = (x ^ (y * 2_654_435_761u32) ^ (z * 805_459_861u32)) & levels[l * 4 + 2];
     if levels[l * 4 + 3] == 1 {
@@ -158,19 +184,13 @@ fn encode_kernel(
     let p = ABSOLUTE_POS / num_levels;
     let l = ABSOLUTE_POS % num_levels;
     let res = levels[l * 4];
-    let (px, py, pz) = (positions[p * 3], positions[p * 3 + 1], positions[p * 3 + 2]);
-    let (ix, iy, iz) = (lower(px, res), lower(py, res), lower(pz, res));
-    let (fx, fy, fz) = (
-        fraction(px, res, ix),
-        fraction(py, res, iy),
-        fraction(pz, res, iz),
-    );
+    let k = cell(positions, p, res);
     #[unroll]
     for f in 0..features {
         let mut acc = 0.0f32;
         for c in 0..8u32 {
-            let w = factor(c & 1, fx) * factor((c >> 1) & 1, fy) * factor((c >> 2) & 1, fz);
-            let row = corner_row(levels, l, ix, iy, iz, c);
+            let w = factor(c & 1, k.fx) * factor((c >> 1) & 1, k.fy) * factor((c >> 2) & 1, k.fz);
+            let row = corner_row(levels, l, &k, c);
             acc += w * table[row * features + f];
         }
         out[(p * num_levels + l) * features + f] = acc;
@@ -194,16 +214,10 @@ fn backward_table_kernel<A: ScatterAdd>(
     let p = ABSOLUTE_POS / num_levels;
     let l = ABSOLUTE_POS % num_levels;
     let res = levels[l * 4];
-    let (px, py, pz) = (positions[p * 3], positions[p * 3 + 1], positions[p * 3 + 2]);
-    let (ix, iy, iz) = (lower(px, res), lower(py, res), lower(pz, res));
-    let (fx, fy, fz) = (
-        fraction(px, res, ix),
-        fraction(py, res, iy),
-        fraction(pz, res, iz),
-    );
+    let k = cell(positions, p, res);
     for c in 0..8u32 {
-        let w = factor(c & 1, fx) * factor((c >> 1) & 1, fy) * factor((c >> 2) & 1, fz);
-        let row = corner_row(levels, l, ix, iy, iz, c);
+        let w = factor(c & 1, k.fx) * factor((c >> 1) & 1, k.fy) * factor((c >> 2) & 1, k.fz);
+        let row = corner_row(levels, l, &k, c);
         #[unroll]
         for f in 0..features {
             let g = grad_out[(p * num_levels + l) * features + f];
@@ -237,16 +251,11 @@ fn backward_positions_kernel(
     for l in 0..num_levels {
         let res = levels[l * 4];
         let rf = f32::cast_from(res);
-        let (ix, iy, iz) = (lower(px, res), lower(py, res), lower(pz, res));
-        let (fx, fy, fz) = (
-            fraction(px, res, ix),
-            fraction(py, res, iy),
-            fraction(pz, res, iz),
-        );
+        let k = cell(positions, p, res);
         for c in 0..8u32 {
             let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-            let (tx, ty, tz) = (factor(bx, fx), factor(by, fy), factor(bz, fz));
-            let row = corner_row(levels, l, ix, iy, iz, c);
+            let (tx, ty, tz) = (factor(bx, k.fx), factor(by, k.fy), factor(bz, k.fz));
+            let row = corner_row(levels, l, &k, c);
             let mut dot = 0.0f32;
             #[unroll]
             for f in 0..features {
@@ -280,13 +289,7 @@ fn jacobian_kernel(
     let l = ABSOLUTE_POS % num_levels;
     let res = levels[l * 4];
     let rf = f32::cast_from(res);
-    let (px, py, pz) = (positions[p * 3], positions[p * 3 + 1], positions[p * 3 + 2]);
-    let (ix, iy, iz) = (lower(px, res), lower(py, res), lower(pz, res));
-    let (fx, fy, fz) = (
-        fraction(px, res, ix),
-        fraction(py, res, iy),
-        fraction(pz, res, iz),
-    );
+    let k = cell(positions, p, res);
     #[unroll]
     for f in 0..features {
         let mut jx = 0.0f32;
@@ -294,16 +297,16 @@ fn jacobian_kernel(
         let mut jz = 0.0f32;
         for c in 0..8u32 {
             let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-            let (tx, ty, tz) = (factor(bx, fx), factor(by, fy), factor(bz, fz));
-            let v = table[corner_row(levels, l, ix, iy, iz, c) * features + f];
+            let (tx, ty, tz) = (factor(bx, k.fx), factor(by, k.fy), factor(bz, k.fz));
+            let v = table[corner_row(levels, l, &k, c) * features + f];
             jx += slope(bx, rf) * ty * tz * v;
             jy += tx * slope(by, rf) * tz * v;
             jz += tx * ty * slope(bz, rf) * v;
         }
         let e = ((p * num_levels + l) * features + f) * 3;
-        jac[e] = jx * inside(px);
-        jac[e + 1] = jy * inside(py);
-        jac[e + 2] = jz * inside(pz);
+        jac[e] = jx * inside(positions[p * 3]);
+        jac[e + 1] = jy * inside(positions[p * 3 + 1]);
+        jac[e + 2] = jz * inside(positions[p * 3 + 2]);
     }
 }
 
@@ -325,23 +328,21 @@ fn jacobian_backward_table_kernel<A: ScatterAdd>(
     let l = ABSOLUTE_POS % num_levels;
     let res = levels[l * 4];
     let rf = f32::cast_from(res);
-    let (px, py, pz) = (positions[p * 3], positions[p * 3 + 1], positions[p * 3 + 2]);
-    let (mx, my, mz) = (inside(px), inside(py), inside(pz));
-    let (ix, iy, iz) = (lower(px, res), lower(py, res), lower(pz, res));
-    let (fx, fy, fz) = (
-        fraction(px, res, ix),
-        fraction(py, res, iy),
-        fraction(pz, res, iz),
+    let (mx, my, mz) = (
+        inside(positions[p * 3]),
+        inside(positions[p * 3 + 1]),
+        inside(positions[p * 3 + 2]),
     );
+    let k = cell(positions, p, res);
     for c in 0..8u32 {
         let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-        let (tx, ty, tz) = (factor(bx, fx), factor(by, fy), factor(bz, fz));
+        let (tx, ty, tz) = (factor(bx, k.fx), factor(by, k.fy), factor(bz, k.fz));
         let (dx, dy, dz) = (
             slope(bx, rf) * ty * tz * mx,
             tx * slope(by, rf) * tz * my,
             tx * ty * slope(bz, rf) * mz,
         );
-        let row = corner_row(levels, l, ix, iy, iz, c);
+        let row = corner_row(levels, l, &k, c);
         #[unroll]
         for f in 0..features {
             let e = ((p * num_levels + l) * features + f) * 3;
@@ -403,19 +404,43 @@ impl Adder {
 
 /// `positions [N, 3]`, `table [R, F]` → `[N, L·F]`.
 pub fn forward(positions: CubeTensor, table: CubeTensor, shape: GridShape) -> CubeTensor {
+    lookup(positions, table, shape, false)
+}
+
+/// The spatial Jacobian `[N, L·F, 3]`.
+pub fn jacobian(positions: CubeTensor, table: CubeTensor, shape: GridShape) -> CubeTensor {
+    lookup(positions, table, shape, true)
+}
+
+/// The encoding, or its Jacobian: one unit per (point, level) reading the table.
+fn lookup(
+    positions: CubeTensor,
+    table: CubeTensor,
+    shape: GridShape,
+    jacobian: bool,
+) -> CubeTensor {
     let layout = shape.layout();
     let n = positions.meta.shape()[0];
     let (positions, table) = (
         contiguous_f32(positions, "positions"),
         contiguous_f32(table, "table"),
     );
-    let out = empty_like(&positions, [n, shape.d_out()]);
+    let out = if jacobian {
+        empty_like(&positions, [n, shape.d_out(), 3])
+    } else {
+        empty_like(&positions, [n, shape.d_out()])
+    };
     if n == 0 {
         return out;
     }
     let (count, dim) = grid(&positions, n * layout.levels());
     let levels = levels_arg(&positions, &layout);
-    encode_kernel::launch(
+    let launch = if jacobian {
+        jacobian_kernel::launch
+    } else {
+        encode_kernel::launch
+    };
+    launch(
         &positions.client.clone(),
         count,
         dim,
@@ -427,58 +452,6 @@ pub fn forward(positions: CubeTensor, table: CubeTensor, shape: GridShape) -> Cu
         layout.features,
     );
     out
-}
-
-/// A zeroed table gradient, filled by `launch`.
-fn scatter_table(like: &CubeTensor, layout: &Layout, launch: impl FnOnce(BufferArg)) -> CubeTensor {
-    let rows = layout.total_rows();
-    let grad = zeros_client(
-        like.client.clone(),
-        like.device.clone(),
-        [rows, layout.features].into(),
-        DType::F32,
-    );
-    // The swap loop reads the f32 zeros as u32 zeros: the same bits.
-    launch(grad.clone().into_buffer_arg());
-    grad
-}
-
-/// `∂L/∂table [R, F]` for upstream `grad_out [N, L·F]`.
-pub fn backward_table(positions: CubeTensor, grad_out: CubeTensor, shape: GridShape) -> CubeTensor {
-    let adder = Adder::for_device(&positions);
-    backward_table_with(positions, grad_out, shape, adder)
-}
-
-/// [`backward_table`] with a chosen adder.
-pub fn backward_table_with(
-    positions: CubeTensor,
-    grad_out: CubeTensor,
-    shape: GridShape,
-    adder: Adder,
-) -> CubeTensor {
-    let layout = shape.layout();
-    let n = positions.meta.shape()[0];
-    let positions = contiguous_f32(positions, "positions");
-    let grad_out = contiguous_f32(grad_out, "upstream gradient");
-    let (count, dim) = grid(&positions, (n * layout.levels()).max(1));
-    let levels = levels_arg(&positions, &layout);
-    let client = positions.client.clone();
-    let (nl, nf) = (layout.levels(), layout.features);
-    scatter_table(&positions.clone(), &layout, |grad| {
-        if n == 0 {
-            return;
-        }
-        let (p, g) = (positions.into_buffer_arg(), grad_out.into_buffer_arg());
-        if adder == Adder::Native {
-            backward_table_kernel::launch::<NativeAdd>(
-                &client, count, dim, p, g, levels, grad, nl, nf,
-            );
-        } else {
-            backward_table_kernel::launch::<SwapAdd>(
-                &client, count, dim, p, g, levels, grad, nl, nf,
-            );
-        }
-    })
 }
 
 /// `∂L/∂positions [N, 3]` for upstream `grad_out [N, L·F]`.
@@ -514,32 +487,10 @@ pub fn backward_positions(
     out
 }
 
-/// The spatial Jacobian `[N, L·F, 3]`.
-pub fn jacobian(positions: CubeTensor, table: CubeTensor, shape: GridShape) -> CubeTensor {
-    let layout = shape.layout();
-    let n = positions.meta.shape()[0];
-    let (positions, table) = (
-        contiguous_f32(positions, "positions"),
-        contiguous_f32(table, "table"),
-    );
-    let out = empty_like(&positions, [n, shape.d_out(), 3]);
-    if n == 0 {
-        return out;
-    }
-    let (count, dim) = grid(&positions, n * layout.levels());
-    let levels = levels_arg(&positions, &layout);
-    jacobian_kernel::launch(
-        &positions.client.clone(),
-        count,
-        dim,
-        positions.into_buffer_arg(),
-        table.into_buffer_arg(),
-        levels,
-        out.clone().into_buffer_arg(),
-        layout.levels(),
-        layout.features,
-    );
-    out
+/// `∂L/∂table [R, F]` for upstream `grad_out [N, L·F]`.
+pub fn backward_table(positions: CubeTensor, grad_out: CubeTensor, shape: GridShape) -> CubeTensor {
+    let adder = Adder::for_device(&positions);
+    table_gradient(positions, grad_out, shape, adder, false)
 }
 
 /// `∂L/∂table [R, F]` for upstream `grad_jac [N, L·F, 3]` of the Jacobian.
@@ -549,39 +500,52 @@ pub fn jacobian_backward_table(
     shape: GridShape,
 ) -> CubeTensor {
     let adder = Adder::for_device(&positions);
-    jacobian_backward_table_with(positions, grad_jac, shape, adder)
+    table_gradient(positions, grad_jac, shape, adder, true)
 }
 
-/// [`jacobian_backward_table`] with a chosen adder.
-pub fn jacobian_backward_table_with(
+/// The table gradient for an upstream gradient of the encoding (`[N, L·F]`) or of its Jacobian
+/// (`[N, L·F, 3]`), accumulated with `adder` into zeros: one unit per (point, level).
+pub fn table_gradient(
     positions: CubeTensor,
-    grad_jac: CubeTensor,
+    upstream: CubeTensor,
     shape: GridShape,
     adder: Adder,
+    jacobian: bool,
 ) -> CubeTensor {
     let layout = shape.layout();
     let n = positions.meta.shape()[0];
     let positions = contiguous_f32(positions, "positions");
-    let grad_jac = contiguous_f32(grad_jac, "upstream gradient");
-    let (count, dim) = grid(&positions, (n * layout.levels()).max(1));
+    let upstream = contiguous_f32(upstream, "upstream gradient");
+    let grad = zeros_client(
+        positions.client.clone(),
+        positions.device.clone(),
+        [layout.total_rows(), layout.features].into(),
+        DType::F32,
+    );
+    if n == 0 {
+        return grad;
+    }
+    let (count, dim) = grid(&positions, n * layout.levels());
     let levels = levels_arg(&positions, &layout);
-    let client = positions.client.clone();
-    let (nl, nf) = (layout.levels(), layout.features);
-    scatter_table(&positions.clone(), &layout, |grad| {
-        if n == 0 {
-            return;
-        }
-        let (p, g) = (positions.into_buffer_arg(), grad_jac.into_buffer_arg());
-        if adder == Adder::Native {
-            jacobian_backward_table_kernel::launch::<NativeAdd>(
-                &client, count, dim, p, g, levels, grad, nl, nf,
-            );
-        } else {
-            jacobian_backward_table_kernel::launch::<SwapAdd>(
-                &client, count, dim, p, g, levels, grad, nl, nf,
-            );
-        }
-    })
+    let launch = match (jacobian, adder) {
+        (false, Adder::Native) => backward_table_kernel::launch::<NativeAdd>,
+        (false, Adder::Swap) => backward_table_kernel::launch::<SwapAdd>,
+        (true, Adder::Native) => jacobian_backward_table_kernel::launch::<NativeAdd>,
+        (true, Adder::Swap) => jacobian_backward_table_kernel::launch::<SwapAdd>,
+    };
+    // The swap loop reads the f32 zeros as u32 zeros: the same bits.
+    launch(
+        &positions.client.clone(),
+        count,
+        dim,
+        positions.into_buffer_arg(),
+        upstream.into_buffer_arg(),
+        levels,
+        grad.clone().into_buffer_arg(),
+        layout.levels(),
+        layout.features,
+    );
+    grad
 }
 
 #[cfg(test)]
@@ -669,17 +633,19 @@ mod tests {
         };
         for &adder in adders {
             let p = || upload(&positions, &[n, 3], &device);
-            let got = download(backward_table_with(
+            let got = download(table_gradient(
                 p(),
                 upload(&grad_out, &[n, width], &device),
                 shape(),
                 adder,
+                false,
             ));
-            let got_jac = download(jacobian_backward_table_with(
+            let got_jac = download(table_gradient(
                 p(),
                 upload(&grad_jac, &[n, width, 3], &device),
                 shape(),
                 adder,
+                true,
             ));
             for (what, got, want) in [
                 ("table", &got, &want_table),
