@@ -115,8 +115,14 @@ fn api_chain() -> Vec<wgpu::Backend> {
 }
 
 /// The adapter wgpu's high-performance choice takes: the first API of the chain that has one,
-/// and on it a discrete GPU before an integrated, virtual or software one.
+/// and on it a discrete GPU before an integrated, virtual or software one. Asked once per
+/// process (`--backend auto` asks, then the wgpu runtime's setup).
 pub fn find_adapter() -> Result<Adapter, GpuError> {
+    static FOUND: OnceLock<Result<Adapter, GpuError>> = OnceLock::new();
+    FOUND.get_or_init(search_adapters).clone()
+}
+
+fn search_adapters() -> Result<Adapter, GpuError> {
     let chain = api_chain();
     for api in &chain {
         if !wgpu::Instance::enabled_backend_features().contains((*api).into()) {
