@@ -554,7 +554,7 @@ mod tests {
     use std::time::Duration;
 
     use burn::backend::ops::FloatTensorOps;
-    use burn::backend::{Backend, DispatchDevice, TensorData, read_sync};
+    use burn::backend::{DispatchDevice, TensorData, read_sync};
     use burn_cubecl::{CubeBackend, CubeDevice};
 
     use super::*;
@@ -586,7 +586,7 @@ mod tests {
     fn download(t: CubeTensor) -> Vec<f32> {
         read_sync(CubeBackend::float_into_data(t))
             .unwrap()
-            .to_vec::<f32>()
+            .try_to_vec::<f32>()
             .unwrap()
     }
 
