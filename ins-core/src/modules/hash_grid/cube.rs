@@ -167,15 +167,18 @@ impl ScatterAdd for SwapAdd {
     }
 }
 
-/// `out[p, l·F + f]`: one unit per (point, level).
+/// The encoding (`out[p, l·F + f]`) or, with `jacobian`, its spatial derivative
+/// (`out[p, l·F + f, k]`, zero along an axis where the point is clamped): one unit per
+/// (point, level).
 #[cube(launch)]
-fn encode_kernel(
+fn lookup_kernel(
     positions: &[f32],
     table: &[f32],
     levels: &[u32],
     out: &mut [f32],
     #[comptime] num_levels: usize,
     #[comptime] features: usize,
+    #[comptime] jacobian: bool,
 ) {
     let n = positions.len() / 3;
     if ABSOLUTE_POS >= n * num_levels {
@@ -184,28 +187,49 @@ fn encode_kernel(
     let p = ABSOLUTE_POS / num_levels;
     let l = ABSOLUTE_POS % num_levels;
     let res = levels[l * 4];
+    let rf = f32::cast_from(res);
     let k = cell(positions, p, res);
     #[unroll]
     for f in 0..features {
-        let mut acc = 0.0f32;
+        let mut v = 0.0f32;
+        let mut jx = 0.0f32;
+        let mut jy = 0.0f32;
+        let mut jz = 0.0f32;
         for c in 0..8u32 {
-            let w = factor(c & 1, k.fx) * factor((c >> 1) & 1, k.fy) * factor((c >> 2) & 1, k.fz);
-            let row = corner_row(levels, l, &k, c);
-            acc += w * table[row * features + f];
+            let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            let (tx, ty, tz) = (factor(bx, k.fx), factor(by, k.fy), factor(bz, k.fz));
+            let t = table[corner_row(levels, l, &k, c) * features + f];
+            if jacobian {
+                jx += slope(bx, rf) * ty * tz * t;
+                jy += tx * slope(by, rf) * tz * t;
+                jz += tx * ty * slope(bz, rf) * t;
+            } else {
+                v += tx * ty * tz * t;
+            }
         }
-        out[(p * num_levels + l) * features + f] = acc;
+        let e = (p * num_levels + l) * features + f;
+        if jacobian {
+            out[e * 3] = jx * inside(positions[p * 3]);
+            out[e * 3 + 1] = jy * inside(positions[p * 3 + 1]);
+            out[e * 3 + 2] = jz * inside(positions[p * 3 + 2]);
+        } else {
+            out[e] = v;
+        }
     }
 }
 
-/// `∂L/∂table` += weight · upstream, scattered into the 8 corner rows of each (point, level).
+/// `∂L/∂table` for an upstream gradient of the encoding (`[N, L·F]`: weight · upstream) or,
+/// with `jacobian`, of its Jacobian (`[N, L·F, 3]`: the weights' derivatives · upstream),
+/// scattered into the 8 corner rows of each (point, level).
 #[cube(launch)]
-fn backward_table_kernel<A: ScatterAdd>(
+fn scatter_kernel<A: ScatterAdd>(
     positions: &[f32],
-    grad_out: &[f32],
+    upstream: &[f32],
     levels: &[u32],
     grad_table: &mut [Atomic<A::Proxy>],
     #[comptime] num_levels: usize,
     #[comptime] features: usize,
+    #[comptime] jacobian: bool,
 ) {
     let n = positions.len() / 3;
     if ABSOLUTE_POS >= n * num_levels {
@@ -214,15 +238,29 @@ fn backward_table_kernel<A: ScatterAdd>(
     let p = ABSOLUTE_POS / num_levels;
     let l = ABSOLUTE_POS % num_levels;
     let res = levels[l * 4];
+    let rf = f32::cast_from(res);
+    let (mx, my, mz) = (
+        inside(positions[p * 3]),
+        inside(positions[p * 3 + 1]),
+        inside(positions[p * 3 + 2]),
+    );
     let k = cell(positions, p, res);
     for c in 0..8u32 {
-        let w = factor(c & 1, k.fx) * factor((c >> 1) & 1, k.fy) * factor((c >> 2) & 1, k.fz);
+        let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+        let (tx, ty, tz) = (factor(bx, k.fx), factor(by, k.fy), factor(bz, k.fz));
         let row = corner_row(levels, l, &k, c);
         #[unroll]
         for f in 0..features {
-            let g = grad_out[(p * num_levels + l) * features + f];
+            let e = (p * num_levels + l) * features + f;
+            let g = if jacobian {
+                slope(bx, rf) * ty * tz * mx * upstream[e * 3]
+                    + tx * slope(by, rf) * tz * my * upstream[e * 3 + 1]
+                    + tx * ty * slope(bz, rf) * mz * upstream[e * 3 + 2]
+            } else {
+                tx * ty * tz * upstream[e]
+            };
             if g != 0.0 {
-                A::add(&mut grad_table[row * features + f], w * g);
+                A::add(&mut grad_table[row * features + f], g);
             }
         }
     }
@@ -269,89 +307,6 @@ fn backward_positions_kernel(
     grad_positions[p * 3] = gx * inside(px);
     grad_positions[p * 3 + 1] = gy * inside(py);
     grad_positions[p * 3 + 2] = gz * inside(pz);
-}
-
-/// `jac[p, l·F + f, k]`: one unit per (point, level).
-#[cube(launch)]
-fn jacobian_kernel(
-    positions: &[f32],
-    table: &[f32],
-    levels: &[u32],
-    jac: &mut [f32],
-    #[comptime] num_levels: usize,
-    #[comptime] features: usize,
-) {
-    let n = positions.len() / 3;
-    if ABSOLUTE_POS >= n * num_levels {
-        terminate!();
-    }
-    let p = ABSOLUTE_POS / num_levels;
-    let l = ABSOLUTE_POS % num_levels;
-    let res = levels[l * 4];
-    let rf = f32::cast_from(res);
-    let k = cell(positions, p, res);
-    #[unroll]
-    for f in 0..features {
-        let mut jx = 0.0f32;
-        let mut jy = 0.0f32;
-        let mut jz = 0.0f32;
-        for c in 0..8u32 {
-            let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-            let (tx, ty, tz) = (factor(bx, k.fx), factor(by, k.fy), factor(bz, k.fz));
-            let v = table[corner_row(levels, l, &k, c) * features + f];
-            jx += slope(bx, rf) * ty * tz * v;
-            jy += tx * slope(by, rf) * tz * v;
-            jz += tx * ty * slope(bz, rf) * v;
-        }
-        let e = ((p * num_levels + l) * features + f) * 3;
-        jac[e] = jx * inside(positions[p * 3]);
-        jac[e + 1] = jy * inside(positions[p * 3 + 1]);
-        jac[e + 2] = jz * inside(positions[p * 3 + 2]);
-    }
-}
-
-/// `∂L/∂table` for upstream `grad_jac` of the Jacobian, scattered like [`backward_table_kernel`].
-#[cube(launch)]
-fn jacobian_backward_table_kernel<A: ScatterAdd>(
-    positions: &[f32],
-    grad_jac: &[f32],
-    levels: &[u32],
-    grad_table: &mut [Atomic<A::Proxy>],
-    #[comptime] num_levels: usize,
-    #[comptime] features: usize,
-) {
-    let n = positions.len() / 3;
-    if ABSOLUTE_POS >= n * num_levels {
-        terminate!();
-    }
-    let p = ABSOLUTE_POS / num_levels;
-    let l = ABSOLUTE_POS % num_levels;
-    let res = levels[l * 4];
-    let rf = f32::cast_from(res);
-    let (mx, my, mz) = (
-        inside(positions[p * 3]),
-        inside(positions[p * 3 + 1]),
-        inside(positions[p * 3 + 2]),
-    );
-    let k = cell(positions, p, res);
-    for c in 0..8u32 {
-        let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-        let (tx, ty, tz) = (factor(bx, k.fx), factor(by, k.fy), factor(bz, k.fz));
-        let (dx, dy, dz) = (
-            slope(bx, rf) * ty * tz * mx,
-            tx * slope(by, rf) * tz * my,
-            tx * ty * slope(bz, rf) * mz,
-        );
-        let row = corner_row(levels, l, &k, c);
-        #[unroll]
-        for f in 0..features {
-            let e = ((p * num_levels + l) * features + f) * 3;
-            let g = dx * grad_jac[e] + dy * grad_jac[e + 1] + dz * grad_jac[e + 2];
-            if g != 0.0 {
-                A::add(&mut grad_table[row * features + f], g);
-            }
-        }
-    }
 }
 
 /// Launch sizes for `units` independent units.
@@ -435,12 +390,7 @@ fn lookup(
     }
     let (count, dim) = grid(&positions, n * layout.levels());
     let levels = levels_arg(&positions, &layout);
-    let launch = if jacobian {
-        jacobian_kernel::launch
-    } else {
-        encode_kernel::launch
-    };
-    launch(
+    lookup_kernel::launch(
         &positions.client.clone(),
         count,
         dim,
@@ -450,6 +400,7 @@ fn lookup(
         out.clone().into_buffer_arg(),
         layout.levels(),
         layout.features,
+        jacobian,
     );
     out
 }
@@ -527,11 +478,9 @@ pub fn table_gradient(
     }
     let (count, dim) = grid(&positions, n * layout.levels());
     let levels = levels_arg(&positions, &layout);
-    let launch = match (jacobian, adder) {
-        (false, Adder::Native) => backward_table_kernel::launch::<NativeAdd>,
-        (false, Adder::Swap) => backward_table_kernel::launch::<SwapAdd>,
-        (true, Adder::Native) => jacobian_backward_table_kernel::launch::<NativeAdd>,
-        (true, Adder::Swap) => jacobian_backward_table_kernel::launch::<SwapAdd>,
+    let launch = match adder {
+        Adder::Native => scatter_kernel::launch::<NativeAdd>,
+        Adder::Swap => scatter_kernel::launch::<SwapAdd>,
     };
     // The swap loop reads the f32 zeros as u32 zeros: the same bits.
     launch(
@@ -544,6 +493,7 @@ pub fn table_gradient(
         grad.clone().into_buffer_arg(),
         layout.levels(),
         layout.features,
+        jacobian,
     );
     grad
 }
