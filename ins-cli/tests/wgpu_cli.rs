@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{assert_clean_failure, ok, s, stderr};
+use common::{assert_clean_failure, s, stderr};
 
 /// Runs `ins-cli args…` with `env`, failing the test (not hanging the suite) after `limit`.
 fn cli_within(args: &[&str], env: &[(&str, &Path)], limit: Duration) -> Output {
@@ -44,19 +44,7 @@ fn last_loss(run: &Path) -> f64 {
 #[test]
 fn nerf_trains_on_wgpu_as_on_flex() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    ok(common::cli(&[
-        "data",
-        "synth",
-        "--format",
-        "blender",
-        "--out",
-        s(&scene),
-        "--size",
-        "32",
-        "--views",
-        "8",
-    ]));
+    let scene = common::synth_scene(dir.path(), "blender", 32, 8);
     // The first wgpu run of a fresh machine compiles and tunes every kernel (minutes on
     // lavapipe); the limit fails the test rather than hanging CI.
     let losses = last_losses_on_flex_and_wgpu(
@@ -96,19 +84,7 @@ fn nerf_trains_on_wgpu_as_on_flex() {
 #[test]
 fn idr_trains_on_wgpu_as_on_flex() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("scene");
-    ok(common::cli(&[
-        "data",
-        "synth",
-        "--format",
-        "dtu",
-        "--out",
-        s(&scene),
-        "--size",
-        "24",
-        "--views",
-        "8",
-    ]));
+    let scene = common::synth_scene(dir.path(), "dtu", 24, 8);
     // Sphere tracing evaluates the SDF's hash grid many times a step: on wgpu one CubeCL kernel
     // each time. The same initial parameters and rays on both backends; three steps, so the
     // loss logged at the last one follows two updates. (Over more steps a ray grazing the
