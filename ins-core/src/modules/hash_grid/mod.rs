@@ -2,13 +2,15 @@
 //! by trilinear interpolation at geometrically growing resolutions.
 //!
 //! - [`kernel`]: the maths on slices (forward, both backwards, the spatial Jacobian).
-//! - [`cube`]: the same maths as CubeCL kernels for the GPU backends.
+//! - [`cube`]: the same maths as CubeCL kernels for the GPU backends (device code in
+//!   `cube_kernels`).
 //! - [`op`]: a Burn op with a hand-written backward that runs the kernels on Flex, NdArray and
 //!   the CubeCL backends.
 //! - [`reference`]: the same function from ordinary Burn ops (the tests' yardstick, and any
 //!   backend without the op).
 
 pub mod cube;
+mod cube_kernels;
 pub mod kernel;
 pub mod op;
 pub mod reference;
