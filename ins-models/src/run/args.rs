@@ -31,7 +31,7 @@ pub struct SourceArgs {
     /// Pretrained run to stylize (its scene, model and scene settings are reused).
     #[arg(long)]
     pub from: Option<PathBuf>,
-    /// Image downscale factor (0: the smallest factor that brings the longer side to ≤ 512 px).
+    /// Image downscale factor (0: the whole factor that brings the longer side nearest 400 px).
     #[arg(long, default_value_t = 0)]
     pub downscale: u32,
     /// COLMAP workspaces: the photos' folder when it is not `images/` beside the model.
@@ -71,9 +71,9 @@ impl SourceArgs {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
 #[serde(default)]
 pub struct ScheduleArgs {
-    /// Training steps (0: the variant's default; NeRF with the grid 1000 pretraining, 4000 on
-    /// forward-facing LLFF scenes, 600 stylizing, with the mlp 200000 / 50000; IDR 12000 /
-    /// 400).
+    /// Training steps (0: the variant's default; NeRF with the grid 1000 pretraining, 2000 on
+    /// forward-facing scenes (LLFF, forward captures), 600 stylizing, with the mlp 200000 /
+    /// 50000; IDR 12000 / 400).
     #[arg(long, default_value_t = 0)]
     pub steps: usize,
     /// Adam learning rate (0: the variant's default; NeRF grid 1e-2 pretraining, 1e-3
