@@ -192,6 +192,20 @@ fn main() {
             .location()
             .map(|l| format!(" (at {}:{})", l.file(), l.line()))
             .unwrap_or_default();
+        if let Some(failure) = ins_core::gpu_failure::memory_failure(&msg) {
+            // The failure surfaces on every thread that reads the failed work: say it once.
+            static TOLD: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+            if !TOLD.swap(true, std::sync::atomic::Ordering::SeqCst) {
+                let adapter = ins_core::gpu::prepared().map(|r| r.adapter.name.as_str());
+                eprintln!(
+                    "error: {}",
+                    ins_core::gpu_failure::memory_advice(adapter, failure)
+                );
+            }
+            if !backtrace {
+                return;
+            }
+        }
         eprintln!("error: internal failure: {msg}{at}");
         if backtrace {
             eprintln!("{}", std::backtrace::Backtrace::force_capture());

@@ -1,6 +1,7 @@
 //! The wgpu backend from the command line (Mesa's lavapipe where there is no GPU): NeRF and IDR
 //! train on it as on flex (their hash grids through the CubeCL kernels), and a machine without
-//! any adapter gets one clear message saying what to do, at once, with nothing written.
+//! any adapter gets one clear message saying what to do, at once, with nothing written; a step
+//! too large for the GPU gets one line naming it and the ways out, not an internal failure.
 
 mod common;
 
@@ -159,4 +160,46 @@ fn wgpu_without_an_adapter_says_so_at_once_and_writes_nothing() {
     assert_clean_failure(&o, "no GPU adapter found");
     assert!(stderr(&o).contains("--backend flex"), "{}", stderr(&o));
     assert!(!out.exists(), "a failed start wrote {}", out.display());
+}
+
+#[test]
+fn a_step_too_large_for_the_gpu_is_told_once_with_the_ways_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::synth_scene(dir.path(), "blender", 32, 8);
+    let out = dir.path().join("run");
+    // 65536 rays of up to 512 samples: lavapipe refuses the MLP's launch ("Cube count too big");
+    // a GPU with room trains it. Either way the run never ends as an internal failure.
+    let o = cli_within(
+        &[
+            "train",
+            "nerf",
+            "--scene",
+            s(&scene),
+            "--backend",
+            "wgpu",
+            "--steps",
+            "2",
+            "--eval-every",
+            "0",
+            "--target-samples",
+            "60000000",
+            "--out",
+            s(&out),
+        ],
+        &[],
+        Duration::from_secs(600),
+    );
+    if o.status.success() {
+        return;
+    }
+    let err = stderr(&o);
+    assert!(!err.contains("internal failure"), "{err}");
+    assert_eq!(
+        err.matches("too large for the GPU").count(),
+        1,
+        "said once: {err}"
+    );
+    for part in ["wgpu", "--downscale", "--target-samples", "--backend flex"] {
+        assert!(err.contains(part), "{part} missing: {err}");
+    }
 }

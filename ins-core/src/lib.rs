@@ -12,6 +12,7 @@ pub mod contain;
 pub mod eval;
 mod flex_kernels;
 pub mod gpu;
+pub mod gpu_failure;
 pub mod imaging;
 pub mod loss;
 pub mod mesh;
