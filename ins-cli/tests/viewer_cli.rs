@@ -193,6 +193,10 @@ fn viewer_in_chromium_and_mesh_export_of_a_stylized_nerf() {
         "1",
         "--style-size",
         "48",
+        // The density stylized too (the paper's way, not the default): in 30 steps the two
+        // styles then differ enough for the browser test's mix slider to change the view.
+        "--stylize-density",
+        "true",
         "--eval-every",
         "0",
         "--quiet",
