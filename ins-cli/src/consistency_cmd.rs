@@ -224,6 +224,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
             weights: gatys_weights,
             style_size: style_args.style_size,
             style_loss: StyleLoss::Gram,
+            match_radius: None,
         };
         let names = frame_names(pretrained.len());
         let paths: Vec<PathBuf> = inputs

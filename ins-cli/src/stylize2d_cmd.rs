@@ -45,6 +45,10 @@ pub struct Stylize2d {
     /// feature matching) or mean-std.
     #[arg(long, default_value = "gram")]
     style_loss: ins_core::loss::StyleLoss,
+    /// With nnfm: each position may only match painting features within this cosine of the
+    /// photo's best match there (0: a style swap; unset or 2: plain NNFM).
+    #[arg(long)]
+    match_radius: Option<f32>,
     /// Adam learning rate in pixel units.
     #[arg(long, default_value_t = 0.02)]
     lr: f64,
@@ -79,6 +83,7 @@ impl Stylize2d {
             ),
             style_size: self.style_size,
             style_loss: self.style_loss,
+            match_radius: self.match_radius,
         }
     }
 

@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use anyhow::Result;
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{PerceptualLoss, mse, patch_images, psnr};
+use ins_core::loss::{ContentTarget, PerceptualLoss, mse, patch_images, psnr};
 use ins_core::modules::cim::ContentModule;
 use ins_core::modules::ins::Ins;
 use ins_core::train::{LossTerms, StepContext, Task};
@@ -97,7 +97,7 @@ pub struct ImageTask<C> {
     perceptual: PerceptualLoss,
     fit_batch: usize,
     patch: PatchSpec,
-    content_cache: HashMap<(u32, u32), Tensor<4>>,
+    content_cache: HashMap<(u32, u32), ContentTarget>,
     _model: std::marker::PhantomData<C>,
 }
 

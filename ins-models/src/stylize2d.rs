@@ -10,7 +10,7 @@ use anyhow::Result;
 use burn::module::Param;
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::loss::{LossWeights, PerceptualLoss, StyleLoss};
+use ins_core::loss::{ContentTarget, LossWeights, PerceptualLoss, StyleLoss};
 use ins_core::train::{
     GroupSpec, LossTerms, Optimizable, Phase, StepContext, Task, TrainOptions, TrainOutcome,
     Trainer,
@@ -74,12 +74,14 @@ pub struct Stylize2dSettings {
     pub style_size: usize,
     /// How the painting's style is matched.
     pub style_loss: StyleLoss,
+    /// NNFM's matches guided by the photo within this radius (see `StyleArgs::match_radius`).
+    pub match_radius: Option<f32>,
 }
 
 /// The task: fixed targets, one image to optimise.
 pub struct Stylize2dTask {
     perceptual: PerceptualLoss,
-    content: Tensor<4>,
+    content: ContentTarget,
 }
 
 /// The painting's loss on the autodiff device the optimisation runs on: its targets are
@@ -99,6 +101,7 @@ pub fn painting_loss(
         settings.style_loss,
         &ad,
     )
+    .with_match_radius(settings.match_radius)
 }
 
 impl Stylize2dTask {

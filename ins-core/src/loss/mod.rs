@@ -16,10 +16,10 @@ pub mod weights;
 pub use color_transfer::ColorTransfer;
 pub use gram::gram;
 pub use perceptual::{
-    PerceptualLoss, StyleTarget, content_distance, content_loss, one_hot_codes, patch_images,
-    photo_patch, style_distance, style_loss,
+    ContentTarget, PerceptualLoss, StyleTarget, content_distance, content_loss, one_hot_codes,
+    patch_images, photo_patch, style_distance, style_loss,
 };
 pub use pixel::{mse, psnr};
 pub use ssim::ssim;
-pub use style::{StyleLoss, StyleTargets};
+pub use style::{MatchGuide, StyleLoss, StyleTargets};
 pub use weights::LossWeights;

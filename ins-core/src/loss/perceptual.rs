@@ -5,7 +5,7 @@ use vgg_import::{Vgg, VggFeatures};
 
 use super::color_transfer::ColorTransfer;
 use super::gram::gram;
-use super::style::{StyleLoss, StyleTargets};
+use super::style::{MatchGuide, StyleLoss, StyleTargets};
 
 /// Gram matrices of a style image at the four style layers, each `[1, C, C]`.
 #[derive(Clone, Debug)]
@@ -121,6 +121,9 @@ pub struct PerceptualLoss {
     /// Per style, the colour map that recolours the photos before their content features are
     /// taken (ARF's colour transfer), where asked for.
     pub recolor: Option<Vec<ColorTransfer>>,
+    /// NNFM's matches restricted to painting features within this radius (in cosine) of the
+    /// photo's best match at each position, where asked for ([`StyleTargets::match_guide`]).
+    pub match_radius: Option<f32>,
 }
 
 impl PerceptualLoss {
@@ -143,7 +146,15 @@ impl PerceptualLoss {
             targets,
             codes: one_hot_codes(styles.len(), device),
             recolor: None,
+            match_radius: None,
         }
+    }
+
+    /// The loss with NNFM's matches guided by the photo within `radius` (`None`: unguided;
+    /// ignored by the other kinds).
+    pub fn with_match_radius(mut self, radius: Option<f32>) -> Self {
+        self.match_radius = radius;
+        self
     }
 
     /// The loss with the content photos recoloured into each painting's palette: `palette` is
@@ -178,8 +189,9 @@ impl PerceptualLoss {
     }
 
     /// The content target of a photo `[1, 3, H, W]`: its relu2_2 features, detached; with
-    /// colour transfer, those of the photo recoloured for each style, `[S, C, H', W']`.
-    pub fn content_target(&self, photo: Tensor<4>) -> Tensor<4> {
+    /// colour transfer, those of the photo recoloured for each style, `[S, C, H', W']`. With a
+    /// match radius, also which painting features each of its positions may match.
+    pub fn content_target(&self, photo: Tensor<4>) -> ContentTarget {
         let photo = match &self.recolor {
             None => photo,
             Some(maps) => {
@@ -194,18 +206,33 @@ impl PerceptualLoss {
                 (a.matmul(x) + b).clamp(0.0, 1.0).reshape([s, 3, h, w])
             }
         };
-        self.vgg.features(photo).relu2_2.detach()
+        let features = self.vgg.features(photo);
+        ContentTarget {
+            guide: self
+                .match_radius
+                .and_then(|r| self.targets.match_guide(&features, r)),
+            relu2_2: features.relu2_2.detach(),
+        }
     }
 
     /// The `style` and `content` terms of rendered images `[S, 3, H, W]` against the targets
     /// and `content_target` (broadcast over the styles).
-    pub fn terms(&self, images: Tensor<4>, content_target: &Tensor<4>) -> (Tensor<1>, Tensor<1>) {
+    pub fn terms(&self, images: Tensor<4>, content: &ContentTarget) -> (Tensor<1>, Tensor<1>) {
         let feats = self.vgg.features(images);
         (
-            self.targets.loss(&feats),
-            content_loss(&feats, content_target),
+            self.targets.loss(&feats, content.guide.as_ref()),
+            content_loss(&feats, &content.relu2_2),
         )
     }
+}
+
+/// What a render of some pixels is compared with, taken once from the photo's same pixels.
+#[derive(Clone, Debug)]
+pub struct ContentTarget {
+    /// The photo's relu2_2 features, detached, `[1 or S, C, H', W']`.
+    pub relu2_2: Tensor<4>,
+    /// For a guided NNFM, which painting features the photo's positions may match.
+    pub guide: Option<MatchGuide>,
 }
 
 /// Rendered patch rows → images: `[S·K·K, 3]` (or any shape holding them in that order, style
@@ -248,13 +275,13 @@ mod tests {
         let blue = image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]);
         let plain =
             PerceptualLoss::new(vgg, &[photo.clone(), blue.clone()], 16, StyleLoss::Gram, &d);
-        let target = plain.content_target(photo.to_tensor(&d));
+        let target = plain.content_target(photo.to_tensor(&d)).relu2_2;
         assert_eq!(target.dims()[0], 1);
         let palette: Vec<[f32; 3]> = photo.data.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
         let recoloured = plain
             .clone()
             .with_color_transfer(&palette, &[photo.clone(), blue]);
-        let t = recoloured.content_target(photo.to_tensor(&d));
+        let t = recoloured.content_target(photo.to_tensor(&d)).relu2_2;
         // One target per style: the first painting is the photo itself (the map is the
         // identity), the second recolours it.
         assert_eq!(t.dims()[0], 2);

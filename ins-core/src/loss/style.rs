@@ -7,6 +7,14 @@
 //!   strokes rather than averages, and the measure of `eval consistency` is its distance.
 //! - [`StyleLoss::MeanStd`]: AdaIN's statistics, each channel's mean and standard deviation.
 //!
+//! NNFM can be guided by the photo ([`StyleTargets::match_guide`]): each position may then only
+//! match painting features within a radius (in cosine) of the best match of the *photo's*
+//! feature there. Unguided, NNFM chooses from the render alone, so once a render starts to look
+//! like strokes its matches pull it further: on real photos the objects are painted over or
+//! nothing happens (docs/measurements.md). Radius 0 is a style swap (Chen and Schmidt's: each
+//! place takes the painting's feature nearest the photo's), 2 is plain NNFM; between, a place
+//! takes strokes that resemble what the photo has there.
+//!
 //! Each is summed over the layers relu1_2, relu2_2, relu3_3, relu4_3 and averaged over the
 //! styles of a batch (row `i` of the batch against painting `i`).
 
@@ -65,6 +73,11 @@ pub enum StyleTargets {
     /// Per layer: each channel's mean and standard deviation, `[S, C]` each.
     MeanStd([(Tensor<2>, Tensor<2>); 4]),
 }
+
+/// Per style, per layer, `[N, M]`: which painting features (of `M`) each of a photo's `N`
+/// positions may match under a guided NNFM: 0 for those allowed, −4 for the others (added to
+/// cosines, it rules them out).
+pub type MatchGuide = Vec<[Tensor<2>; 4]>;
 
 /// Each channel's mean and standard deviation over the positions of `f [B, C, H, W]`.
 fn moments(f: &Tensor<4>) -> (Tensor<2>, Tensor<2>) {
@@ -129,9 +142,35 @@ impl StyleTargets {
         }
     }
 
+    /// For NNFM, the guide of a photo's features (a batch of one, or one row per style): at
+    /// each position of each layer, the painting features within `radius` (in cosine) of the
+    /// photo's best match there. `None` for the other kinds.
+    pub fn match_guide(&self, photo: &VggFeatures, radius: f32) -> Option<MatchGuide> {
+        let StyleTargets::Nnfm(paintings) = self else {
+            return None;
+        };
+        let layers = photo.style_layers();
+        Some(
+            paintings
+                .iter()
+                .enumerate()
+                .map(|(i, painting)| {
+                    std::array::from_fn(|l| {
+                        let f = layers[l];
+                        let [b, c, h, w] = f.dims();
+                        let row = i.min(b - 1);
+                        let fi = f.clone().detach().slice([row..row + 1]).reshape([c, h * w]);
+                        candidates(fi, painting[l].clone(), radius)
+                    })
+                })
+                .collect(),
+        )
+    }
+
     /// The style term of `features` (batch row `i` against painting `i`; a batch of one
-    /// against every painting is not meant).
-    pub fn loss(&self, features: &VggFeatures) -> Tensor<1> {
+    /// against every painting is not meant). `guide`, the photo's [`Self::match_guide`],
+    /// restricts NNFM's matches; the other kinds ignore it.
+    pub fn loss(&self, features: &VggFeatures, guide: Option<&MatchGuide>) -> Tensor<1> {
         match self {
             StyleTargets::Gram(grams) => super::perceptual::style_loss(features, grams),
             StyleTargets::Nnfm(paintings) => {
@@ -141,7 +180,18 @@ impl StyleTargets {
                     for (i, painting) in paintings.iter().enumerate() {
                         let [_, c, h, w] = f.dims();
                         let fi = (*f).clone().slice([i..i + 1]).reshape([c, h * w]);
-                        let term = nnfm(fi, painting[l].clone()).div_scalar(paintings.len() as f32);
+                        let term = match guide {
+                            None => nnfm(fi, painting[l].clone()),
+                            Some(g) => {
+                                let matched = nearest_columns_among(
+                                    fi.clone(),
+                                    painting[l].clone(),
+                                    g[i][l].clone(),
+                                );
+                                cosine_distance(fi, matched)
+                            }
+                        }
+                        .div_scalar(paintings.len() as f32);
                         total = Some(match total {
                             Some(t) => t + term,
                             None => term,
@@ -166,23 +216,63 @@ impl StyleTargets {
     }
 }
 
-/// ARF's NNFM term of one image's features `[C, N]` against a painting's unit columns
-/// `[C, M]`: the mean over positions of 1 − cos(f_i, s_nn(i)), the nearest painting feature
-/// `nn(i)` (by cosine) chosen without gradient.
-pub fn nnfm(features: Tensor<2>, painting: Tensor<2>) -> Tensor<1> {
-    let [c, n] = features.dims();
-    let f = unit_columns(features);
-    let nearest = f
-        .clone()
-        .detach()
+/// For each column of `features [C, N]`, the column of `painting [C, M]` (unit columns) with
+/// the largest cosine to it, `[C, N]`; no gradient.
+pub fn nearest_columns(features: Tensor<2>, painting: Tensor<2>) -> Tensor<2> {
+    let [_, n] = features.dims();
+    let nearest = unit_columns(features.detach())
         .transpose()
         .matmul(painting.clone())
         .argmax(1)
         .reshape([n]);
-    let matched = painting.select(1, nearest);
-    let cos = (f * matched).sum_dim(0).reshape([n]);
-    let _ = c;
+    painting.select(1, nearest).detach()
+}
+
+/// `[N, M]`: 0 where painting column `j` is within `radius` (in cosine) of the best match of
+/// photo column `i`, −4 elsewhere (so that adding it to cosines excludes those).
+pub fn candidates(photo: Tensor<2>, painting: Tensor<2>, radius: f32) -> Tensor<2> {
+    let sim = unit_columns(photo.detach()).transpose().matmul(painting);
+    let best = sim.clone().max_dim(1);
+    let [n, m] = sim.dims();
+    (sim - best.expand([n, m]))
+        .add_scalar(radius)
+        .greater_equal_elem(0.0)
+        .float()
+        .mul_scalar(4.0)
+        .sub_scalar(4.0)
+        .detach()
+}
+
+/// For each column of `features [C, N]`, the painting column (unit, `[C, M]`) with the largest
+/// cosine to it among the candidates `bias [N, M]` leaves (see [`candidates`]), `[C, N]`.
+pub fn nearest_columns_among(
+    features: Tensor<2>,
+    painting: Tensor<2>,
+    bias: Tensor<2>,
+) -> Tensor<2> {
+    let [_, n] = features.dims();
+    let nearest = (unit_columns(features.detach())
+        .transpose()
+        .matmul(painting.clone())
+        + bias)
+        .argmax(1)
+        .reshape([n]);
+    painting.select(1, nearest).detach()
+}
+
+/// The mean over positions of 1 − cos(f_i, t_i), `features` and unit `targets` both `[C, N]`.
+pub fn cosine_distance(features: Tensor<2>, targets: Tensor<2>) -> Tensor<1> {
+    let [_, n] = features.dims();
+    let cos = (unit_columns(features) * targets).sum_dim(0).reshape([n]);
     cos.neg().add_scalar(1.0).mean()
+}
+
+/// ARF's NNFM term of one image's features `[C, N]` against a painting's unit columns
+/// `[C, M]`: the mean over positions of 1 − cos(f_i, s_nn(i)), the nearest painting feature
+/// `nn(i)` (by cosine) chosen without gradient.
+pub fn nnfm(features: Tensor<2>, painting: Tensor<2>) -> Tensor<1> {
+    let matched = nearest_columns(features.clone(), painting);
+    cosine_distance(features, matched)
 }
 
 #[cfg(test)]
@@ -197,14 +287,8 @@ mod tests {
 
     /// NNFM by brute force on the host: each column's best cosine, 1 − it, averaged.
     fn brute_force(f: &[[f32; 3]], s: &[[f32; 3]]) -> f32 {
-        let cos = |a: &[f32; 3], b: &[f32; 3]| {
-            let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
-            let na = a.iter().map(|x| x * x).sum::<f32>().sqrt();
-            let nb = b.iter().map(|x| x * x).sum::<f32>().sqrt();
-            dot / (na * nb)
-        };
         f.iter()
-            .map(|a| 1.0 - s.iter().map(|b| cos(a, b)).fold(f32::MIN, f32::max))
+            .map(|a| 1.0 - s.iter().map(|b| cos3(a, b)).fold(f32::MIN, f32::max))
             .sum::<f32>()
             / f.len() as f32
     }
@@ -219,12 +303,7 @@ mod tests {
             [0.0, 0.1, 2.0],
         ];
         let s = [[0.9, 0.1, 0.1], [0.0, 0.0, 1.0], [0.2, 1.0, 0.0]];
-        let cols = |v: &[[f32; 3]]| {
-            let rows: Vec<Vec<f32>> = (0..3).map(|c| v.iter().map(|x| x[c]).collect()).collect();
-            let refs: Vec<&[f32]> = rows.iter().map(|r| r.as_slice()).collect();
-            t2(&refs, &d)
-        };
-        let got = nnfm(cols(&f), unit_columns(cols(&s))).into_scalar::<f32>();
+        let got = nnfm(columns(&f, &d), unit_columns(columns(&s, &d))).into_scalar::<f32>();
         let want = brute_force(&f, &s);
         assert!((got - want).abs() < 1e-5, "{got} vs {want}");
     }
@@ -246,6 +325,97 @@ mod tests {
         assert!(g[1] > 0.0 && g[0] < 0.0, "{g:?}");
     }
 
+    /// Columns of a `[C, N]` tensor from points given as rows.
+    fn columns(v: &[[f32; 3]], d: &Device) -> Tensor<2> {
+        let rows: Vec<Vec<f32>> = (0..3).map(|c| v.iter().map(|x| x[c]).collect()).collect();
+        let refs: Vec<&[f32]> = rows.iter().map(|r| r.as_slice()).collect();
+        t2(&refs, d)
+    }
+
+    fn cos3(a: &[f32; 3], b: &[f32; 3]) -> f32 {
+        let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+        dot / (a.iter().map(|x| x * x).sum::<f32>().sqrt()
+            * b.iter().map(|x| x * x).sum::<f32>().sqrt())
+    }
+
+    #[test]
+    fn a_guided_match_is_the_renders_nearest_among_the_photos_near_matches() {
+        let d = Device::flex();
+        let photo = [
+            [0.9, 0.0, 0.2],
+            [0.1, 0.1, 1.0],
+            [0.0, 1.0, 0.1],
+            [0.4, 0.5, 0.0],
+        ];
+        let render = [
+            [0.0, 0.3, 1.0],
+            [1.0, 0.0, 0.1],
+            [1.0, 0.2, 0.0],
+            [0.0, 0.1, 1.0],
+        ];
+        let s = [
+            [1.0, 0.1, 0.0],
+            [0.0, 0.2, 3.0],
+            [0.1, 2.0, 0.0],
+            [0.6, 0.6, 0.1],
+        ];
+        let painting = unit_columns(columns(&s, &d));
+        let unit = painting.clone().into_data().try_to_vec::<f32>().unwrap();
+        for radius in [0.0, 0.1, 0.3, 2.0] {
+            let guide = candidates(columns(&photo, &d), painting.clone(), radius);
+            let got = nearest_columns_among(columns(&render, &d), painting.clone(), guide)
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap();
+            for (i, (p, r)) in photo.iter().zip(&render).enumerate() {
+                // Brute force: the painting features within `radius` of the photo's best
+                // cosine, and among them the one nearest the render's feature.
+                let best = s.iter().map(|x| cos3(p, x)).fold(f32::MIN, f32::max);
+                let want = (0..s.len())
+                    .filter(|&j| cos3(p, &s[j]) >= best - radius)
+                    .max_by(|&a, &b| cos3(r, &s[a]).total_cmp(&cos3(r, &s[b])))
+                    .unwrap();
+                for c in 0..3 {
+                    let (g, w) = (got[c * photo.len() + i], unit[c * s.len() + want]);
+                    assert!(
+                        (g - w).abs() < 1e-6,
+                        "radius {radius}, position {i}: {g} vs {w}"
+                    );
+                }
+            }
+        }
+        // Radius 2 allows every painting feature: plain NNFM.
+        let all = candidates(columns(&photo, &d), painting.clone(), 2.0);
+        let guided = nearest_columns_among(columns(&render, &d), painting.clone(), all);
+        let plain = nearest_columns(columns(&render, &d), painting);
+        let diff = (guided - plain).abs().max().into_scalar::<f32>();
+        assert!(diff < 1e-7, "{diff}");
+    }
+
+    #[test]
+    fn guided_by_the_photo_nnfm_no_longer_follows_the_render() {
+        let d = Device::flex().autodiff();
+        let s = unit_columns(t2(&[&[1.0, 0.0], &[0.0, 1.0]], &d));
+        // The render's feature (1, 0.5) lies nearest (1, 0); the photo's (0.2, 1) nearest (0, 1).
+        let photo = t2(&[&[0.2], &[1.0]], &d);
+        let grad = |loss: Tensor<1>, f: &Tensor<2>| {
+            f.grad(&loss.backward())
+                .unwrap()
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap()
+        };
+        let f = t2(&[&[1.0], &[0.5]], &d).require_grad();
+        let guide = candidates(photo, s.clone(), 0.1);
+        let matched = nearest_columns_among(f.clone(), s.clone(), guide);
+        let g_guided = grad(cosine_distance(f.clone(), matched), &f);
+        let f = t2(&[&[1.0], &[0.5]], &d).require_grad();
+        let g_nnfm = grad(nnfm(f.clone(), s), &f);
+        // Descending: guided, the feature turns towards (0, 1); unguided, towards (1, 0).
+        assert!(g_guided[0] > 0.0 && g_guided[1] < 0.0, "{g_guided:?}");
+        assert!(g_nnfm[0] < 0.0 && g_nnfm[1] > 0.0, "{g_nnfm:?}");
+    }
+
     #[test]
     fn each_loss_is_zero_on_the_painting_itself_and_positive_elsewhere() {
         let d = Device::flex();
@@ -256,11 +426,23 @@ mod tests {
         };
         let painting = Tensor::<4>::random([1, 3, 32, 32], burn::tensor::Distribution::Default, &d);
         let other = Tensor::<4>::random([1, 3, 32, 32], burn::tensor::Distribution::Default, &d);
-        for kind in [StyleLoss::Gram, StyleLoss::Nnfm, StyleLoss::MeanStd] {
+        // NNFM also guided by a photo that is the painting (each position's match is itself).
+        for (kind, radius) in [
+            (StyleLoss::Gram, None),
+            (StyleLoss::Nnfm, None),
+            (StyleLoss::Nnfm, Some(0.1)),
+            (StyleLoss::MeanStd, None),
+        ] {
             let t = StyleTargets::from_images(kind, &vgg, std::slice::from_ref(&painting));
             assert_eq!(t.kind(), kind);
-            let same = t.loss(&vgg.features(painting.clone())).into_scalar::<f32>();
-            let diff = t.loss(&vgg.features(other.clone())).into_scalar::<f32>();
+            let guide = radius.and_then(|r| t.match_guide(&vgg.features(painting.clone()), r));
+            assert_eq!(guide.is_some(), radius.is_some());
+            let same = t
+                .loss(&vgg.features(painting.clone()), guide.as_ref())
+                .into_scalar::<f32>();
+            let diff = t
+                .loss(&vgg.features(other.clone()), guide.as_ref())
+                .into_scalar::<f32>();
             assert!(
                 same.abs() < 1e-4 * diff.abs().max(1e-6),
                 "{kind}: {same} vs {diff}"

@@ -93,7 +93,8 @@ pub fn train<V: Variant>(
         let vgg = vgg.context("stylizing needs VGG-16")?.to_device(&ad);
         let preprocess = vgg.preprocess;
         let s = V::style(&cfg);
-        let mut loss = PerceptualLoss::new(vgg, &styles, s.style_size, s.loss(), &ad);
+        let mut loss = PerceptualLoss::new(vgg, &styles, s.style_size, s.loss(), &ad)
+            .with_match_radius(s.match_radius);
         if s.color_transfer {
             let data = match &start {
                 Start::Fresh(data) => data,
