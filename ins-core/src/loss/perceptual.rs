@@ -208,8 +208,11 @@ impl PerceptualLoss {
         };
         let features = self.vgg.features(photo);
         ContentTarget {
+            // Cosines lie in [−1, 1]: from a radius of 2 every feature is allowed, which is
+            // plain NNFM, without the guide's cost.
             guide: self
                 .match_radius
+                .filter(|&r| r < 2.0)
                 .and_then(|r| self.targets.match_guide(&features, r)),
             relu2_2: features.relu2_2.detach(),
         }
@@ -294,5 +297,38 @@ mod tests {
             same < 1e-2 * other,
             "identity map moved the target: {same} vs {other}"
         );
+    }
+
+    #[test]
+    fn a_match_radius_below_two_guides_nnfm_and_from_two_it_is_plain_nnfm() {
+        let d = Device::flex();
+        d.seed(2);
+        let vgg = Vgg {
+            net: vgg_import::Vgg16Features::random(&d),
+            preprocess: vgg_import::Preprocess::Caffe,
+        };
+        let photo = image(16, 16, |x, y| [x as f32 / 16.0, y as f32 / 16.0, 0.5]);
+        let painting = image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]);
+        let nnfm = PerceptualLoss::new(
+            vgg,
+            std::slice::from_ref(&painting),
+            16,
+            StyleLoss::Nnfm,
+            &d,
+        );
+        let guide = |r: Option<f32>| {
+            nnfm.clone()
+                .with_match_radius(r)
+                .content_target(photo.to_tensor(&d))
+                .guide
+                .is_some()
+        };
+        assert!(guide(Some(0.2)));
+        assert!(!guide(Some(2.0)));
+        assert!(!guide(None));
+        // Other losses have no matches to guide.
+        let gram = PerceptualLoss::new(nnfm.vgg.clone(), &[painting], 16, StyleLoss::Gram, &d)
+            .with_match_radius(Some(0.2));
+        assert!(gram.content_target(photo.to_tensor(&d)).guide.is_none());
     }
 }
