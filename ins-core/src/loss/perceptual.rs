@@ -266,14 +266,19 @@ mod tests {
         }
     }
 
+    /// A VGG-16 of random weights (seeded), enough where only shapes and identities matter.
+    fn random_vgg(d: &Device, seed: u64) -> Vgg {
+        d.seed(seed);
+        Vgg {
+            net: vgg_import::Vgg16Features::random(d),
+            preprocess: vgg_import::Preprocess::Caffe,
+        }
+    }
+
     #[test]
     fn colour_transfer_recolours_the_content_per_style() {
         let d = Device::flex();
-        d.seed(1);
-        let vgg = Vgg {
-            net: vgg_import::Vgg16Features::random(&d),
-            preprocess: vgg_import::Preprocess::Caffe,
-        };
+        let vgg = random_vgg(&d, 1);
         let photo = image(16, 16, |x, y| [x as f32 / 16.0, y as f32 / 16.0, 0.5]);
         let blue = image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]);
         let plain =
@@ -302,11 +307,7 @@ mod tests {
     #[test]
     fn a_match_radius_below_two_guides_nnfm_and_from_two_it_is_plain_nnfm() {
         let d = Device::flex();
-        d.seed(2);
-        let vgg = Vgg {
-            net: vgg_import::Vgg16Features::random(&d),
-            preprocess: vgg_import::Preprocess::Caffe,
-        };
+        let vgg = random_vgg(&d, 2);
         let photo = image(16, 16, |x, y| [x as f32 / 16.0, y as f32 / 16.0, 0.5]);
         let painting = image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]);
         let nnfm = PerceptualLoss::new(

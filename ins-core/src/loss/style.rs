@@ -219,13 +219,20 @@ impl StyleTargets {
 /// For each column of `features [C, N]`, the column of `painting [C, M]` (unit columns) with
 /// the largest cosine to it, `[C, N]`; no gradient.
 pub fn nearest_columns(features: Tensor<2>, painting: Tensor<2>) -> Tensor<2> {
+    nearest(features, painting, None)
+}
+
+/// The nearest painting column to each feature, among those `bias` (if any) leaves.
+fn nearest(features: Tensor<2>, painting: Tensor<2>, bias: Option<Tensor<2>>) -> Tensor<2> {
     let [_, n] = features.dims();
-    let nearest = unit_columns(features.detach())
+    let sim = unit_columns(features.detach())
         .transpose()
-        .matmul(painting.clone())
-        .argmax(1)
-        .reshape([n]);
-    painting.select(1, nearest).detach()
+        .matmul(painting.clone());
+    let sim = match bias {
+        Some(b) => sim + b,
+        None => sim,
+    };
+    painting.select(1, sim.argmax(1).reshape([n])).detach()
 }
 
 /// `[N, M]`: 0 where painting column `j` is within `radius` (in cosine) of the best match of
@@ -250,14 +257,7 @@ pub fn nearest_columns_among(
     painting: Tensor<2>,
     bias: Tensor<2>,
 ) -> Tensor<2> {
-    let [_, n] = features.dims();
-    let nearest = (unit_columns(features.detach())
-        .transpose()
-        .matmul(painting.clone())
-        + bias)
-        .argmax(1)
-        .reshape([n]);
-    painting.select(1, nearest).detach()
+    nearest(features, painting, Some(bias))
 }
 
 /// The mean over positions of 1 − cos(f_i, t_i), `features` and unit `targets` both `[C, N]`.
