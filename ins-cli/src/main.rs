@@ -218,8 +218,21 @@ fn main() {
             if backtrace {
                 eprintln!("{}", e.backtrace());
             }
-            std::process::exit(1);
+            exit_now(1);
         }
-        Err(_) => std::process::exit(101),
+        Err(_) => exit_now(101),
     }
+}
+
+/// Ends the process with `code` without running the C library's exit handlers. Why: on an
+/// NVIDIA H100 (Vulkan driver 580), a run that stopped on an error after the wgpu device was
+/// up ended in a segmentation fault (status 139, after its message) while the driver's
+/// handlers tore the device down under CubeCL's device thread. Everything a run writes is
+/// written atomically before this point, so there is nothing left to flush but stdio.
+fn exit_now(code: i32) -> ! {
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    let _ = std::io::stderr().flush();
+    // SAFETY: `_exit` takes no pointers and never returns.
+    unsafe { libc::_exit(code) }
 }

@@ -40,6 +40,11 @@ impl VggArgs {
     pub fn load(&self, device: &Device) -> anyhow::Result<Vgg> {
         let vgg = load_vgg(&self.source(), device)?;
         let precision = self.precision();
+        if !ins_conv::kernel_device(device) {
+            // The BF16 kernels run on flex only; elsewhere (wgpu, ndarray) Burn convolves in f32.
+            eprintln!("VGG convolutions in f32 (Burn's convolution: the BF16 kernels are flex's)");
+            return Ok(vgg.with_precision(precision));
+        }
         match precision.effective() {
             Precision::F32 if precision == Precision::Bf16 => eprintln!(
                 "--precision bf16: this CPU (or {}) offers neither AMX-BF16 nor AVX-512 BF16; \

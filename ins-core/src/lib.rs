@@ -18,4 +18,5 @@ pub mod loss;
 pub mod mesh;
 pub mod modules;
 pub mod render;
+pub mod shape_buckets;
 pub mod train;

@@ -4,6 +4,7 @@
 
 use burn::prelude::*;
 use ins_core::render::sphere_tracing::{TraceOptions, Traced, sphere_trace};
+use ins_core::shape_buckets::padded_size;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{Rays, flatten};
 
@@ -15,14 +16,22 @@ pub fn sdf_at(sdf: &SdfNet, points: &[f32], device: &Device) -> Vec<f32> {
     let mut out = Vec::with_capacity(points.len() / 3);
     for chunk in points.chunks(3 * 65536) {
         let n = chunk.len() / 3;
-        let x = Tensor::<1>::from_floats(chunk, device).reshape([n, 3]);
-        out.extend(
-            sdf.sdf(x)
-                .into_data()
-                .convert::<f32>()
-                .try_into_vec::<f32>()
-                .unwrap_or_else(|_| vec![f32::NAN; n]),
-        );
+        // Sphere tracing asks for fewer points every iteration: on GPUs a bucketed count (the
+        // first point repeated) lets its kernels be reused.
+        let rows = padded_size(n, device);
+        let mut padded = chunk.to_vec();
+        for _ in n..rows {
+            padded.extend_from_within(..3);
+        }
+        let x = Tensor::<1>::from_floats(padded.as_slice(), device).reshape([rows, 3]);
+        let mut f = sdf
+            .sdf(x)
+            .into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .unwrap_or_else(|_| vec![f32::NAN; rows]);
+        f.truncate(n);
+        out.extend(f);
     }
     out
 }
@@ -68,7 +77,8 @@ pub struct SurfaceRender {
     pub traced: Traced,
     /// Indices of the rays that hit.
     pub hits: Vec<usize>,
-    /// The SDF gradient at the differentiable surface points `[H, 3]` (for eikonal terms).
+    /// The SDF gradient at the differentiable surface points `[H', 3]` (for eikonal terms):
+    /// the first `hits.len()` rows are the hits, any further rows padding (GPU size buckets).
     pub surface_gradients: Option<Tensor<2>>,
     /// Wall time of the sphere tracing, in milliseconds (where a step's time goes).
     pub trace_ms: f64,
@@ -109,12 +119,16 @@ pub fn render_surface(
             trace_ms,
         };
     }
-    let h = hits.len();
-    let x0: Vec<f32> = hits
-        .iter()
+    // On GPUs the hits are padded to a bucketed count with copies of the first, read by no ray.
+    let h = padded_size(hits.len(), device);
+    let padded = || {
+        hits.iter()
+            .chain(std::iter::repeat_n(&hits[0], h - hits.len()))
+    };
+    let x0: Vec<f32> = padded()
         .flat_map(|&i| rays.point(i, traced.t[i]).to_array())
         .collect();
-    let dirs: Vec<Vec3> = hits.iter().map(|&i| rays.directions[i]).collect();
+    let dirs: Vec<Vec3> = padded().map(|&i| rays.directions[i]).collect();
     let x0 = tensor2(x0, h, 3, device);
     let v = tensor2(flatten(&dirs), h, 3, device);
     let (x, normals, features) = if differentiable {

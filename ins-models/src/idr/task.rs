@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use burn::prelude::*;
 use ins_core::loss::{PerceptualLoss, patch_images, photo_patch, psnr};
 use ins_core::render::sphere_tracing::TraceOptions;
+use ins_core::shape_buckets::padded_size;
 use ins_core::train::{LossTerms, StepContext, Task};
 use ins_scene::data::{Scene, Split};
 use ins_scene::mask_sampler::MaskedPixels;
@@ -178,16 +179,25 @@ impl IdrTask {
                         batch.rays.point(i, t).to_array()
                     })
                     .collect();
-                let m = outside.len();
-                let gt: Vec<f32> = outside.iter().map(|&i| mask[i]).collect();
+                // Padded to a bucketed count on GPUs; padding weighs nothing.
+                let m = padded_size(outside.len(), &self.device);
+                let mut pts = pts;
+                let mut gt: Vec<f32> = outside.iter().map(|&i| mask[i]).collect();
+                let mut weight = vec![1f32; outside.len()];
+                for _ in outside.len()..m {
+                    pts.extend_from_within(..3);
+                    gt.push(0.0);
+                    weight.push(0.0);
+                }
                 let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([m, 3]);
                 let s = model.sdf.sdf(x);
                 let logits = s.mul_scalar(-alpha);
                 let gt = Tensor::<1>::from_floats(gt.as_slice(), &self.device);
+                let weight = Tensor::<1>::from_floats(weight.as_slice(), &self.device);
                 // BCE with logits, stable form: max(z, 0) − z·y + log(1 + e^{−|z|}).
                 let bce = logits.clone().clamp_min(0.0) - logits.clone() * gt
                     + logits.abs().neg().exp().add_scalar(1.0).log();
-                terms = terms.term("mask", bce.sum().div_scalar(alpha * r as f32));
+                terms = terms.term("mask", (bce * weight).sum().div_scalar(alpha * r as f32));
             } else {
                 terms = terms.term("mask", Tensor::<1>::zeros([1], &self.device));
             }
@@ -202,12 +212,22 @@ impl IdrTask {
             let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]);
             model.sdf.forward_with_gradient(x).2
         });
+        // Rows past the hits in the surface gradients are GPU padding: weight 0.
+        let mut weight = vec![1f32; k + out.hits.len()];
+        if let Some(g) = &out.surface_gradients {
+            weight.resize(k + g.dims()[0], 0.0);
+        }
         let gradients: Vec<Tensor<2>> = random.into_iter().chain(out.surface_gradients).collect();
         let eik = if gradients.is_empty() {
             Tensor::<1>::zeros([1], &self.device)
         } else {
             let g = Tensor::cat(gradients, 0);
-            g.square().sum_dim(1).sqrt().sub_scalar(1.0).square().mean()
+            let counted = weight.iter().sum::<f32>();
+            let weight = Tensor::<1>::from_floats(weight.as_slice(), &self.device);
+            let per_point = g.square().sum_dim(1).sqrt().sub_scalar(1.0).square();
+            (per_point.reshape([weight.dims()[0]]) * weight)
+                .sum()
+                .div_scalar(counted)
         };
         Ok(terms.term("eikonal", eik))
     }

@@ -5,6 +5,7 @@ use burn::prelude::*;
 use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite};
+use ins_core::shape_buckets::padded_size;
 use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{RayBatch, Rays, flatten};
@@ -179,9 +180,12 @@ fn render_marched(
         m.offsets.iter_mut().skip(1).for_each(|o| *o = 1);
     }
     let n = m.len();
-    let width = m.max_per_ray().max(1);
-    let mut x = Vec::with_capacity(n * 3);
-    let mut dirs = Vec::with_capacity(n * 3);
+    // On GPUs the sample count and the widest ray are rounded up to a bucket, so the kernels
+    // of one step serve the next; the extra samples repeat the first and no ray reads them.
+    let n_eval = padded_size(n, device);
+    let width = padded_size(m.max_per_ray().max(1), device);
+    let mut x = Vec::with_capacity(n_eval * 3);
+    let mut dirs = Vec::with_capacity(n_eval * 3);
     for (&ray, &t) in m.ray.iter().zip(&m.t) {
         x.extend(
             grid.field_point(rays.rays.point(ray as usize, t))
@@ -189,8 +193,12 @@ fn render_marched(
         );
         dirs.extend(rays.view_dirs[ray as usize].to_array());
     }
-    // Padded [R, width] layout: index into the packed samples, N for padding.
-    let mut index = vec![n as i64; r * width];
+    for _ in n..n_eval {
+        x.extend_from_within(..3);
+        dirs.extend_from_within(..3);
+    }
+    // Padded [R, width] layout: index into the evaluated samples, `n_eval` (a zero) for padding.
+    let mut index = vec![n_eval as i64; r * width];
     let mut t_pad = vec![0f32; r * width];
     let mut delta_pad = vec![0f32; r * width];
     for ray in 0..r {
@@ -210,7 +218,7 @@ fn render_marched(
             t_pad[ray * width + j] = last;
         }
     }
-    let points = tensor2(x, n, 3, device);
+    let points = tensor2(x, n_eval, 3, device);
     let ev = model.evaluate(
         points.clone(),
         model.field.color.encode_dirs(&dirs, device),

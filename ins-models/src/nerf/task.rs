@@ -10,6 +10,7 @@ use ins_core::imaging::RgbImage;
 use ins_core::loss::{PerceptualLoss, mse, patch_images, photo_patch, psnr};
 use ins_core::modules::field::Geometry;
 use ins_core::render::occupancy::OccupancyGrid;
+use ins_core::shape_buckets::nearest_bucket;
 use ins_core::train::{LossTerms, StepContext, Task};
 use ins_scene::data::{Scene, Split};
 use ins_scene::patches::{PatchSampler, PatchSpec};
@@ -155,13 +156,15 @@ impl NerfTask {
         }
     }
 
-    /// Rays this step: fixed for coarse-to-fine, adapted to the sample budget when marching.
+    /// Rays this step: fixed for coarse-to-fine, adapted to the sample budget when marching,
+    /// rounded to the nearest size [bucket](ins_core::shape_buckets::bucket) so that the count
+    /// repeats from step to step (GPU kernels are compiled per size; the CPU loses nothing).
     fn ray_count(&self) -> usize {
         match self.sampler {
-            Sampler::Marching { target_samples, .. } => {
+            Sampler::Marching { target_samples, .. } => nearest_bucket(
                 ((target_samples as f32 / self.samples_per_ray.max(1.0)) as usize)
-                    .clamp(256, 1 << 16)
-            }
+                    .clamp(256, 1 << 16),
+            ),
             Sampler::CoarseFine { rays, .. } => rays,
         }
     }
