@@ -8,6 +8,7 @@
 mod hash_grid;
 mod idr_pretrain;
 mod nerf_grid;
+mod nerf_grid_stylize;
 mod nerf_pretrain;
 mod nerf_stylize;
 mod scenes;
@@ -27,8 +28,9 @@ use ins_core::train::{Phase, Stepper, Task};
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Workloads: vgg, vgg-layers (per-convolution profile), siren, nerf-pretrain, nerf-stylize,
-    /// nerf-grid, hash-grid, hash-grid-reference, idr-pretrain (default: vgg, siren,
-    /// nerf-pretrain, nerf-stylize, nerf-grid).
+    /// nerf-grid, nerf-grid-stylize (the default stylization step: grid NeRF, guided NNFM),
+    /// hash-grid, hash-grid-reference, idr-pretrain (default: vgg, siren, nerf-pretrain,
+    /// nerf-stylize, nerf-grid).
     workloads: Vec<String>,
     #[command(flatten)]
     device: crate::common::DeviceArgs,
@@ -50,7 +52,7 @@ pub struct Timing {
     pub rays: Option<f64>,
 }
 
-const KNOWN: &str = "vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, hash-grid, hash-grid-reference, idr-pretrain";
+const KNOWN: &str = "vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, nerf-grid-stylize, hash-grid, hash-grid-reference, idr-pretrain";
 
 pub fn run(args: BenchArgs) -> Result<()> {
     let workloads = if args.workloads.is_empty() {
@@ -75,6 +77,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "nerf-pretrain" => nerf_pretrain::run(&device, args.steps)?,
             "nerf-stylize" => nerf_stylize::run(&device, args.steps, precision)?,
             "nerf-grid" => nerf_grid::run(&device, args.steps)?,
+            "nerf-grid-stylize" => nerf_grid_stylize::run(&device, args.steps, precision)?,
             "hash-grid" => hash_grid::run(&device, args.steps, true)?,
             "hash-grid-reference" => hash_grid::run(&device, args.steps, false)?,
             "idr-pretrain" => idr_pretrain::run(&device, args.steps)?,
@@ -92,7 +95,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "max_ms": (sorted[sorted.len() - 1] * 10.0).round() / 10.0,
             "peak_rss_mb": peak_rss_mb(),
         });
-        if matches!(w.as_str(), "vgg" | "siren" | "nerf-stylize") {
+        if matches!(
+            w.as_str(),
+            "vgg" | "siren" | "nerf-stylize" | "nerf-grid-stylize"
+        ) {
             line["precision"] = precision.effective().to_string().into();
         }
         if let Some(rays) = timing.rays {

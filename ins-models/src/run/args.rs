@@ -110,13 +110,14 @@ pub struct StyleArgs {
     /// Default: nnfm for NeRF and IDR (it draws the painting's strokes on the object where
     /// Gram carried mostly its palette, docs/measurements.md), gram for SIREN.
     #[arg(long)]
+    #[serde(default = "legacy_style_loss")]
     pub style_loss: Option<StyleLoss>,
     /// With nnfm: each place of a render may only take painting features within this cosine
     /// of the best match of the photo's feature there, so strokes follow what the photo shows
     /// (0: a style swap, the painting's feature nearest the photo's; 2: plain NNFM, whose
     /// matches follow the render and can paint a real photo over).
     #[arg(long)]
-    #[serde(default)]
+    #[serde(default = "legacy_match_radius")]
     pub match_radius: Option<f32>,
     /// Style loss weight (default: per style loss and VGG preprocessing).
     #[arg(long)]
@@ -135,6 +136,18 @@ pub struct StyleArgs {
     /// Pixels between patch rays (0: the variant's rule, see `PatchSpec::spanning`).
     #[arg(long, default_value_t = 0)]
     pub stride: usize,
+}
+
+/// What a run config written before `style_loss` existed ran: Gram. Read as such (not as
+/// "unset"), so that resolving the variant's defaults cannot change an old run on `--resume`.
+fn legacy_style_loss() -> Option<StyleLoss> {
+    Some(StyleLoss::Gram)
+}
+
+/// What a run config written before `match_radius` existed ran: unguided NNFM (a radius of 2,
+/// the whole cosine range), for the same reason.
+fn legacy_match_radius() -> Option<f32> {
+    Some(2.0)
 }
 
 impl Default for StyleArgs {
@@ -237,7 +250,60 @@ mod tests {
             .expect("an old style group parses");
         assert_eq!(old.loss(), StyleLoss::Gram);
         // Nor a match radius: its NNFM, if it had one, was unguided.
-        assert_eq!(old.match_radius, None);
+        assert_eq!(old.match_radius, Some(2.0));
+        // Resolving the defaults (as `--resume` does) keeps what the old runs ran, so their
+        // configs still compare equal: Gram before the choice, unguided NNFM before the radius.
+        let mut resumed = StyleArgs {
+            patch: 64,
+            ..old.clone()
+        };
+        let saved = resumed.clone();
+        resumed.resolve(64, 256, StyleLoss::Nnfm);
+        assert_eq!(resumed, saved);
+        let nnfm: StyleArgs = serde_json::from_str(
+            r#"{"styles": ["a.png"], "style_size": 256, "patch": 64, "style_loss": "nnfm"}"#,
+        )
+        .expect("a style group from before the radius parses");
+        let mut resumed = nnfm.clone();
+        resumed.resolve(64, 256, StyleLoss::Nnfm);
+        assert_eq!(resumed, nnfm);
+        assert_eq!(resumed.match_radius, Some(2.0));
+    }
+
+    /// An interrupted stylization written before `style_loss` and `match_radius` existed
+    /// resumes from its own config (`--resume --config RUN/config.json`): read back and given
+    /// the variant's defaults, it still equals what the run saved.
+    #[test]
+    fn a_run_saved_before_the_loss_choices_resumes_from_its_own_config() {
+        use crate::config::{merge_with_file, write_run_config};
+        use crate::nerf::NerfRunConfig;
+        use clap::{CommandFactory, FromArgMatches, Parser};
+        #[derive(Parser)]
+        struct Cmd {
+            #[command(flatten)]
+            cfg: NerfRunConfig,
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path().join("run");
+        let mut cfg = NerfRunConfig::default();
+        cfg.style.styles = vec![dir.path().join("starry.jpg")];
+        cfg.style.resolve(64, 256, StyleLoss::Nnfm);
+        let mut saved = serde_json::to_value(&cfg).unwrap();
+        let fields = saved.as_object_mut().unwrap();
+        assert!(fields.remove("style_loss").is_some() && fields.remove("match_radius").is_some());
+        std::fs::create_dir_all(&run).unwrap();
+        let file = run.join("config.json");
+        std::fs::write(&file, serde_json::to_string(&saved).unwrap()).unwrap();
+
+        let matches = Cmd::command().get_matches_from(["ins-cli"]);
+        let cli = Cmd::from_arg_matches(&matches).unwrap().cfg;
+        let mut resumed = merge_with_file(cli, &matches, Some(&file)).unwrap();
+        resumed.style.resolve(64, 256, StyleLoss::Nnfm);
+        assert_eq!(resumed.style.loss(), StyleLoss::Gram, "it ran Gram");
+        write_run_config(&resumed, &run, true).expect("the old run resumes");
+        // Today's defaults (guided NNFM) are another configuration, and are refused.
+        let e = write_run_config(&cfg, &run, true).unwrap_err();
+        assert!(format!("{e:#}").contains("another configuration"), "{e:#}");
     }
 
     #[test]
