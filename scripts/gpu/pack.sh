@@ -1,0 +1,42 @@
+#!/bin/bash
+# Packs what a GPU check needs into .dev/ (ignored by git; about 50 MB, under the device tool's
+# 64 MiB): the release binary stripped and xz-compressed, the converted VGG-16 weights, lego at
+# 200² (every 4th val view), a painting, PyTorch's benchmark program, and Vulkan's loader and
+# libglvnd as .deb files in .gl/ (NVIDIA's Vulkan driver needs libGLdispatch).
+# Run from the repository root after `cargo build --release -p ins-cli` and `ins-cli vgg fetch`.
+# PYTHON must have Pillow (for the 200² lego).
+set -euo pipefail
+SHARED=${SHARED:-../shared}
+PYTHON=${PYTHON:-python3}
+CACHE=${INS_CACHE_DIR:-$HOME/.cache/ins-rs}
+grep -qx '/.dev/' .git/info/exclude 2>/dev/null || echo /.dev/ >> .git/info/exclude
+grep -qx '/.gl/' .git/info/exclude 2>/dev/null || echo /.gl/ >> .git/info/exclude
+mkdir -p .dev .gl
+strip -o /tmp/ins-cli.stripped target/release/ins-cli
+xz -9 -T2 -c /tmp/ins-cli.stripped > .dev/ins-cli.xz
+# The converted weights are found by a key of the ONNX file's path, size and modification time:
+# the check recreates an empty file with the same three at the same path.
+onnx=$CACHE/vgg16/vgg16_imagenet_tf2onnx.onnx
+bpk=$(ls "$CACHE"/vgg16/converted-*.bpk | head -1)
+xz -9 -T2 -c "$bpk" > .dev/vgg.bpk.xz
+cp "${bpk%.bpk}.json" .dev/
+echo "$(basename "$bpk") $onnx $(stat -c %s "$onnx") $(stat -c %y "$onnx" | sed 's/ /_/g')" > .dev/vgg.meta
+cp "$SHARED/data/styles/starry_night.jpg" "$SHARED/bench/torch_ref.py" .dev/
+"$PYTHON" - "$SHARED/data/nerf_synthetic/lego" .dev/lego200 <<'PY'
+import json, os, sys
+from PIL import Image
+src, dst = sys.argv[1], sys.argv[2]
+for split, every in (("train", 1), ("val", 4)):
+    os.makedirs(f"{dst}/{split}", exist_ok=True)
+    t = json.load(open(f"{src}/transforms_{split}.json"))
+    t["frames"] = t["frames"][::every]
+    for fr in t["frames"]:
+        p = fr["file_path"]
+        Image.open(f"{src}/{p}.png").resize((200, 200), Image.BOX).save(f"{dst}/{p[2:]}.png", optimize=True)
+    json.dump(t, open(f"{dst}/transforms_{split}.json", "w"))
+PY
+o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
+mkdir -p /tmp/amd64/partial
+apt-get $o update >/dev/null
+(cd .gl && apt-get $o download libvulkan1 libglvnd0 libegl1 libgl1 libglx0 >/dev/null)
+du -sh .dev .gl
