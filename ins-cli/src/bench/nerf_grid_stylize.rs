@@ -12,10 +12,10 @@ use ins_core::loss::{LossWeights, PerceptualLoss, StyleLoss};
 use ins_core::train::RunFolder;
 use ins_models::nerf::run::fresh_grid;
 use ins_models::nerf::{Nerf, NerfRunConfig};
-use ins_models::run::{Run, RunKind, Start, Variant};
+use ins_models::run::{RunKind, Start, Variant};
 use ins_scene::geometry::Vec3;
 
-use super::scenes::{blender_scene, random_painting, random_vgg};
+use super::scenes::{base_run, blender_scene, random_painting, random_vgg};
 use super::{Timing, time_task};
 
 pub fn run(device: &Device, steps: usize, precision: Precision) -> Result<Timing> {
@@ -41,14 +41,7 @@ pub fn run(device: &Device, steps: usize, precision: Precision) -> Result<Timing
             })
             .collect()
     });
-    let base = Run::<Nerf> {
-        dir: dir.path().join("base"),
-        config: cfg.clone(),
-        base: None,
-        data,
-        model: pretrained,
-        extra: Some(grid),
-    };
+    let base = base_run(dir.path(), &cfg, data, pretrained, Some(grid));
     let perceptual = PerceptualLoss::new(
         random_vgg(device, precision),
         &[random_painting(256, device)?],

@@ -9,10 +9,10 @@ use ins_conv::Precision;
 use ins_core::loss::LossWeights;
 use ins_core::train::RunFolder;
 use ins_models::nerf::Nerf;
-use ins_models::run::{Run, RunKind, Start, Variant};
+use ins_models::run::{RunKind, Start, Variant};
 
 use super::nerf_pretrain::mlp_config;
-use super::scenes::{blender_scene, random_perceptual};
+use super::scenes::{base_run, blender_scene, random_perceptual};
 use super::{Timing, time_task};
 
 pub fn run(device: &Device, steps: usize, precision: Precision) -> Result<Timing> {
@@ -30,14 +30,7 @@ pub fn run(device: &Device, steps: usize, precision: Precision) -> Result<Timing
     Nerf::resolve(&mut cfg, RunKind::Stylize, &data);
     let pretrained = Nerf::new_model(&cfg, &data, device);
     let model = Nerf::add_stylizer(pretrained.clone(), &cfg, 1, device);
-    let base = Run::<Nerf> {
-        dir: dir.path().join("base"),
-        config: cfg.clone(),
-        base: None,
-        data,
-        model: pretrained,
-        extra: None,
-    };
+    let base = base_run(dir.path(), &cfg, data, pretrained, None);
     let perceptual = random_perceptual(device, precision)?;
     let folder = RunFolder::new(dir.path().join("run"));
     let mut task = Nerf::task(&cfg, Start::From(base), Some(perceptual), &folder, device)?;

@@ -47,3 +47,22 @@ pub fn random_perceptual(device: &Device, precision: Precision) -> Result<Percep
         device,
     ))
 }
+
+/// A pretrained NeRF run held in memory (no checkpoint on disk), to stylize from: its folder
+/// `dir/base`, the config, the scene, the model and its occupancy grid (grid variant).
+pub fn base_run(
+    dir: &std::path::Path,
+    config: &ins_models::nerf::NerfRunConfig,
+    data: ins_models::nerf::run::NerfScene,
+    model: ins_models::nerf::NerfModel,
+    grid: Option<ins_core::render::occupancy::OccupancyGrid>,
+) -> ins_models::run::Run<ins_models::nerf::Nerf> {
+    ins_models::run::Run {
+        dir: dir.join("base"),
+        config: config.clone(),
+        base: None,
+        data,
+        model,
+        extra: grid,
+    }
+}
