@@ -27,6 +27,9 @@ pub fn run(device: &Device, steps: usize, precision: Precision) -> Result<Timing
     // The benchmark's workload (docs/benchmarks.md) is the paper's: Gram, no texture grid.
     cfg.stylizer.sim_grid = 0;
     cfg.style.style_loss = Some(ins_core::loss::StyleLoss::Gram);
+    // The paper's (and PyTorch reference's) step trains the density too, under the geometry
+    // loss; the product's default keeps the density and needs no teacher pass.
+    cfg.stylize_density = true;
     Nerf::resolve(&mut cfg, RunKind::Stylize, &data);
     let pretrained = Nerf::new_model(&cfg, &data, device);
     let model = Nerf::add_stylizer(pretrained.clone(), &cfg, 1, device);

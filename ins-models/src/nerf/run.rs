@@ -188,7 +188,10 @@ impl Variant for Nerf {
                 )?;
                 let style = Stylization {
                     perceptual,
-                    teacher: base.model.field.geometry.to_device(device).no_grad(),
+                    // With the density kept the student's density is the teacher's: no term.
+                    teacher: cfg
+                        .stylize_density
+                        .then(|| base.model.field.geometry.to_device(device).no_grad()),
                     patch,
                 };
                 let eval = eval_schedule(cfg, &scene, folder);

@@ -60,8 +60,10 @@ pub enum Sampler {
 pub struct Stylization {
     /// VGG, the paintings' targets and the style codes.
     pub perceptual: PerceptualLoss,
-    /// The pretrained geometry, frozen: the teacher of the geometry loss.
-    pub teacher: Geometry,
+    /// The pretrained geometry, frozen: the teacher of the geometry loss. `None` when the
+    /// density is kept (frozen), where the student's density is the teacher's and the term is
+    /// 0 with no gradient: evaluating the teacher at every sample would cost a field pass.
+    pub teacher: Option<Geometry>,
     /// Patch geometry.
     pub patch: PatchSpec,
 }
@@ -257,7 +259,10 @@ impl NerfTask {
         let photo = photo_patch(&patch.batch.rgb, k, &self.device);
         let content_target = perceptual.content_target(photo);
         let (style_term, content_term) = perceptual.terms(images, &content_target);
-        let geometry = geometry_loss(&style.teacher, out.points, out.raw);
+        let geometry = match &style.teacher {
+            Some(teacher) => geometry_loss(teacher, out.points, out.raw),
+            None => Tensor::zeros([1], &self.device),
+        };
         Ok(LossTerms::default()
             .term("style", style_term)
             .term("content", content_term)
