@@ -52,6 +52,16 @@ pub fn padded_size(n: usize, device: &Device) -> usize {
     }
 }
 
+/// Pads row-major `values` (rows of `width`) to `rows` rows by repeating the first row: the
+/// inert filler of a bucketed batch (its rows are evaluated and never read).
+pub fn pad_rows(values: &mut Vec<f32>, width: usize, rows: usize) {
+    let have = values.len() / width;
+    values.reserve(rows.saturating_sub(have) * width);
+    for _ in have..rows {
+        values.extend_from_within(..width);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,6 +103,18 @@ mod tests {
         }
         assert_eq!(nearest_bucket(5049), 5120);
         assert_eq!(nearest_bucket(4650), 4608);
+    }
+
+    #[test]
+    fn padding_repeats_the_first_row_up_to_the_count() {
+        let mut v = vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        pad_rows(&mut v, 3, 2);
+        assert_eq!(v.len(), 6, "already that many rows");
+        pad_rows(&mut v, 3, 4);
+        assert_eq!(
+            v,
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 1.0, 2.0, 3.0, 1.0, 2.0, 3.0]
+        );
     }
 
     #[test]

@@ -275,12 +275,19 @@ mod tests {
         }
     }
 
+    /// A 16² photo (a red-green ramp) and a 16² blue painting.
+    fn photo_and_blue_painting() -> (RgbImage, RgbImage) {
+        (
+            image(16, 16, |x, y| [x as f32 / 16.0, y as f32 / 16.0, 0.5]),
+            image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]),
+        )
+    }
+
     #[test]
     fn colour_transfer_recolours_the_content_per_style() {
         let d = Device::flex();
         let vgg = random_vgg(&d, 1);
-        let photo = image(16, 16, |x, y| [x as f32 / 16.0, y as f32 / 16.0, 0.5]);
-        let blue = image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]);
+        let (photo, blue) = photo_and_blue_painting();
         let plain =
             PerceptualLoss::new(vgg, &[photo.clone(), blue.clone()], 16, StyleLoss::Gram, &d);
         let target = plain.content_target(photo.to_tensor(&d)).relu2_2;
@@ -308,8 +315,7 @@ mod tests {
     fn a_match_radius_below_two_guides_nnfm_and_from_two_it_is_plain_nnfm() {
         let d = Device::flex();
         let vgg = random_vgg(&d, 2);
-        let photo = image(16, 16, |x, y| [x as f32 / 16.0, y as f32 / 16.0, 0.5]);
-        let painting = image(16, 16, |x, _| [0.1, 0.2, 0.5 + x as f32 / 40.0]);
+        let (photo, painting) = photo_and_blue_painting();
         let nnfm = PerceptualLoss::new(
             vgg,
             std::slice::from_ref(&painting),

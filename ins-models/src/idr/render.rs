@@ -4,7 +4,7 @@
 
 use burn::prelude::*;
 use ins_core::render::sphere_tracing::{TraceOptions, Traced, sphere_trace};
-use ins_core::shape_buckets::padded_size;
+use ins_core::shape_buckets::{pad_rows, padded_size};
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{Rays, flatten};
 
@@ -19,11 +19,14 @@ pub fn sdf_at(sdf: &SdfNet, points: &[f32], device: &Device) -> Vec<f32> {
         // Sphere tracing asks for fewer points every iteration: on GPUs a bucketed count (the
         // first point repeated) lets its kernels be reused.
         let rows = padded_size(n, device);
-        let mut padded = chunk.to_vec();
-        for _ in n..rows {
-            padded.extend_from_within(..3);
-        }
-        let x = Tensor::<1>::from_floats(padded.as_slice(), device).reshape([rows, 3]);
+        let points: std::borrow::Cow<[f32]> = if rows == n {
+            chunk.into()
+        } else {
+            let mut padded = chunk.to_vec();
+            pad_rows(&mut padded, 3, rows);
+            padded.into()
+        };
+        let x = Tensor::<1>::from_floats(&*points, device).reshape([rows, 3]);
         let mut f = sdf
             .sdf(x)
             .into_data()

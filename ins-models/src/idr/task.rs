@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use burn::prelude::*;
 use ins_core::loss::{PerceptualLoss, patch_images, photo_patch, psnr};
 use ins_core::render::sphere_tracing::TraceOptions;
-use ins_core::shape_buckets::padded_size;
+use ins_core::shape_buckets::{pad_rows, padded_size};
 use ins_core::train::{LossTerms, StepContext, Task};
 use ins_scene::data::{Scene, Split};
 use ins_scene::mask_sampler::MaskedPixels;
@@ -182,13 +182,11 @@ impl IdrTask {
                 // Padded to a bucketed count on GPUs; padding weighs nothing.
                 let m = padded_size(outside.len(), &self.device);
                 let mut pts = pts;
+                pad_rows(&mut pts, 3, m);
                 let mut gt: Vec<f32> = outside.iter().map(|&i| mask[i]).collect();
+                gt.resize(m, 0.0);
                 let mut weight = vec![1f32; outside.len()];
-                for _ in outside.len()..m {
-                    pts.extend_from_within(..3);
-                    gt.push(0.0);
-                    weight.push(0.0);
-                }
+                weight.resize(m, 0.0);
                 let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([m, 3]);
                 let s = model.sdf.sdf(x);
                 let logits = s.mul_scalar(-alpha);

@@ -5,7 +5,7 @@ use burn::prelude::*;
 use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite};
-use ins_core::shape_buckets::padded_size;
+use ins_core::shape_buckets::{pad_rows, padded_size};
 use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{RayBatch, Rays, flatten};
@@ -193,10 +193,8 @@ fn render_marched(
         );
         dirs.extend(rays.view_dirs[ray as usize].to_array());
     }
-    for _ in n..n_eval {
-        x.extend_from_within(..3);
-        dirs.extend_from_within(..3);
-    }
+    pad_rows(&mut x, 3, n_eval);
+    pad_rows(&mut dirs, 3, n_eval);
     // Padded [R, width] layout: index into the evaluated samples, `n_eval` (a zero) for padding.
     let mut index = vec![n_eval as i64; r * width];
     let mut t_pad = vec![0f32; r * width];
