@@ -62,9 +62,35 @@ pub fn pad_rows(values: &mut Vec<f32>, width: usize, rows: usize) {
     }
 }
 
+/// The sum of the first `counted` entries of `values [N]`, the rest being a bucketed batch's
+/// padding: masked out (the shape stays the bucket's) when there is padding, a plain sum when
+/// there is none (the CPU backend's exact sizes).
+pub fn sum_counted(values: Tensor<1>, counted: usize) -> Tensor<1> {
+    let [n] = values.dims();
+    if counted >= n {
+        return values.sum();
+    }
+    let keep: Vec<f32> = (0..n)
+        .map(|i| if i < counted { 1.0 } else { 0.0 })
+        .collect();
+    let keep = Tensor::<1>::from_floats(keep.as_slice(), &values.device());
+    (values * keep).sum()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_counted_sum_leaves_the_padding_out_of_value_and_gradient() {
+        let d = Device::flex().autodiff();
+        let v = Tensor::<1>::from_floats([1.0, 2.0, 4.0, 8.0], &d).require_grad();
+        let padded = sum_counted(v.clone(), 2);
+        assert_eq!(padded.clone().into_scalar::<f32>(), 3.0);
+        let g = v.grad(&padded.backward()).unwrap().into_data();
+        assert_eq!(g.to_vec::<f32>().unwrap(), vec![1.0, 1.0, 0.0, 0.0]);
+        assert_eq!(sum_counted(v, 4).into_scalar::<f32>(), 15.0);
+    }
 
     #[test]
     fn buckets_cover_every_size_within_an_eighth_and_are_few_per_octave() {

@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use burn::prelude::*;
 use ins_core::loss::{PerceptualLoss, patch_images, photo_patch, psnr};
 use ins_core::render::sphere_tracing::TraceOptions;
-use ins_core::shape_buckets::{pad_rows, padded_size};
+use ins_core::shape_buckets::{pad_rows, padded_size, sum_counted};
 use ins_core::train::{LossTerms, StepContext, Task};
 use ins_scene::data::{Scene, Split};
 use ins_scene::mask_sampler::MaskedPixels;
@@ -185,17 +185,15 @@ impl IdrTask {
                 pad_rows(&mut pts, 3, m);
                 let mut gt: Vec<f32> = outside.iter().map(|&i| mask[i]).collect();
                 gt.resize(m, 0.0);
-                let mut weight = vec![1f32; outside.len()];
-                weight.resize(m, 0.0);
                 let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([m, 3]);
                 let s = model.sdf.sdf(x);
                 let logits = s.mul_scalar(-alpha);
                 let gt = Tensor::<1>::from_floats(gt.as_slice(), &self.device);
-                let weight = Tensor::<1>::from_floats(weight.as_slice(), &self.device);
                 // BCE with logits, stable form: max(z, 0) − z·y + log(1 + e^{−|z|}).
                 let bce = logits.clone().clamp_min(0.0) - logits.clone() * gt
                     + logits.abs().neg().exp().add_scalar(1.0).log();
-                terms = terms.term("mask", (bce * weight).sum().div_scalar(alpha * r as f32));
+                let bce = sum_counted(bce.reshape([m]), outside.len());
+                terms = terms.term("mask", bce.div_scalar(alpha * r as f32));
             } else {
                 terms = terms.term("mask", Tensor::<1>::zeros([1], &self.device));
             }
@@ -210,22 +208,16 @@ impl IdrTask {
             let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]);
             model.sdf.forward_with_gradient(x).2
         });
-        // Rows past the hits in the surface gradients are GPU padding: weight 0.
-        let mut weight = vec![1f32; k + out.hits.len()];
-        if let Some(g) = &out.surface_gradients {
-            weight.resize(k + g.dims()[0], 0.0);
-        }
+        // Rows past the hits in the surface gradients are GPU padding, left out of the sum.
+        let counted = k + out.hits.len();
         let gradients: Vec<Tensor<2>> = random.into_iter().chain(out.surface_gradients).collect();
         let eik = if gradients.is_empty() {
             Tensor::<1>::zeros([1], &self.device)
         } else {
             let g = Tensor::cat(gradients, 0);
-            let counted = weight.iter().sum::<f32>();
-            let weight = Tensor::<1>::from_floats(weight.as_slice(), &self.device);
+            let rows = g.dims()[0];
             let per_point = g.square().sum_dim(1).sqrt().sub_scalar(1.0).square();
-            (per_point.reshape([weight.dims()[0]]) * weight)
-                .sum()
-                .div_scalar(counted)
+            sum_counted(per_point.reshape([rows]), counted).div_scalar(counted as f32)
         };
         Ok(terms.term("eikonal", eik))
     }
