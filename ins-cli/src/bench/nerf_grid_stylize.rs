@@ -49,7 +49,8 @@ pub fn run(device: &Device, steps: usize, precision: Precision) -> Result<Timing
         cfg.style.loss(),
         device,
     )
-    .with_match_radius(cfg.style.match_radius);
+    .with_match_radius(cfg.style.match_radius)
+    .with_texture_match_radius(cfg.style.texture_match_radius);
     let folder = RunFolder::new(dir.path().join("run"));
     let mut task = Nerf::task(&cfg, Start::From(base), Some(perceptual), &folder, device)?;
     let w = LossWeights::default_for(vgg_import::Preprocess::Caffe, StyleLoss::Nnfm);

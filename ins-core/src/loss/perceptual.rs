@@ -5,7 +5,7 @@ use vgg_import::{Vgg, VggFeatures};
 
 use super::color_transfer::ColorTransfer;
 use super::gram::gram;
-use super::style::{MatchGuide, StyleLoss, StyleTargets};
+use super::style::{MatchGuide, StyleLoss, StyleTargets, UNGUIDED_RADIUS};
 
 /// Gram matrices of a style image at the four style layers, each `[1, C, C]`.
 #[derive(Clone, Debug)]
@@ -124,6 +124,9 @@ pub struct PerceptualLoss {
     /// NNFM's matches restricted to painting features within this radius (in cosine) of the
     /// photo's best match at each position, where asked for ([`StyleTargets::match_guide`]).
     pub match_radius: Option<f32>,
+    /// The radius at the texture layers (relu3_3, relu4_3), where it differs from
+    /// `match_radius` (which then holds at the palette layers, relu1_2 and relu2_2).
+    pub texture_match_radius: Option<f32>,
 }
 
 impl PerceptualLoss {
@@ -147,6 +150,7 @@ impl PerceptualLoss {
             codes: one_hot_codes(styles.len(), device),
             recolor: None,
             match_radius: None,
+            texture_match_radius: None,
         }
     }
 
@@ -155,6 +159,21 @@ impl PerceptualLoss {
     pub fn with_match_radius(mut self, radius: Option<f32>) -> Self {
         self.match_radius = radius;
         self
+    }
+
+    /// The loss with another radius at the texture layers (relu3_3, relu4_3) than at the
+    /// palette layers (`None`: the same).
+    pub fn with_texture_match_radius(mut self, radius: Option<f32>) -> Self {
+        self.texture_match_radius = radius;
+        self
+    }
+
+    /// NNFM's radius at each style layer (relu1_2, relu2_2, relu3_3, relu4_3); unguided is
+    /// [`UNGUIDED_RADIUS`].
+    pub fn match_radii(&self) -> [f32; 4] {
+        let palette = self.match_radius.unwrap_or(UNGUIDED_RADIUS);
+        let texture = self.texture_match_radius.unwrap_or(palette);
+        [palette, palette, texture, texture]
     }
 
     /// The loss with the content photos recoloured into each painting's palette: `palette` is
@@ -208,12 +227,7 @@ impl PerceptualLoss {
         };
         let features = self.vgg.features(photo);
         ContentTarget {
-            // Cosines lie in [−1, 1]: from a radius of 2 every feature is allowed, which is
-            // plain NNFM, without the guide's cost.
-            guide: self
-                .match_radius
-                .filter(|&r| r < 2.0)
-                .and_then(|r| self.targets.match_guide(&features, r)),
+            guide: self.targets.match_guide(&features, self.match_radii()),
             relu2_2: features.relu2_2.detach(),
         }
     }
@@ -333,6 +347,23 @@ mod tests {
         assert!(guide(Some(0.2)));
         assert!(!guide(Some(2.0)));
         assert!(!guide(None));
+        // A radius per layer group: only the layers under 2 are guided.
+        let layers = |palette: Option<f32>, texture: Option<f32>| {
+            let g = nnfm
+                .clone()
+                .with_match_radius(palette)
+                .with_texture_match_radius(texture)
+                .content_target(photo.to_tensor(&d))
+                .guide;
+            g.map(|g| g[0].each_ref().map(|l| l.is_some()))
+        };
+        assert_eq!(layers(Some(0.2), None), Some([true; 4]));
+        assert_eq!(
+            layers(Some(0.2), Some(2.0)),
+            Some([true, true, false, false])
+        );
+        assert_eq!(layers(None, Some(0.4)), Some([false, false, true, true]));
+        assert_eq!(layers(Some(2.0), Some(2.0)), None);
         // Other losses have no matches to guide.
         let gram = PerceptualLoss::new(nnfm.vgg.clone(), &[painting], 16, StyleLoss::Gram, &d)
             .with_match_radius(Some(0.2));

@@ -76,8 +76,12 @@ pub enum StyleTargets {
 
 /// Per style, per layer, `[N, M]`: which painting features (of `M`) each of a photo's `N`
 /// positions may match under a guided NNFM: 0 for those allowed, −4 for the others (added to
-/// cosines, it rules them out).
-pub type MatchGuide = Vec<[Tensor<2>; 4]>;
+/// cosines, it rules them out). `None` at a layer left unguided (plain NNFM there).
+pub type MatchGuide = Vec<[Option<Tensor<2>>; 4]>;
+
+/// From this radius on every feature is allowed (cosines lie in [−1, 1]): plain NNFM, without
+/// the guide's cost.
+pub const UNGUIDED_RADIUS: f32 = 2.0;
 
 /// Each channel's mean and standard deviation over the positions of `f [B, C, H, W]`.
 fn moments(f: &Tensor<4>) -> (Tensor<2>, Tensor<2>) {
@@ -143,12 +147,16 @@ impl StyleTargets {
     }
 
     /// For NNFM, the guide of a photo's features (a batch of one, or one row per style): at
-    /// each position of each layer, the painting features within `radius` (in cosine) of the
-    /// photo's best match there. `None` for the other kinds.
-    pub fn match_guide(&self, photo: &VggFeatures, radius: f32) -> Option<MatchGuide> {
+    /// each position of layer `l`, the painting features within `radii[l]` (in cosine) of the
+    /// photo's best match there (none at a layer whose radius reaches [`UNGUIDED_RADIUS`]).
+    /// `None` for the other kinds, or when no layer is guided.
+    pub fn match_guide(&self, photo: &VggFeatures, radii: [f32; 4]) -> Option<MatchGuide> {
         let StyleTargets::Nnfm(paintings) = self else {
             return None;
         };
+        if radii.iter().all(|&r| r >= UNGUIDED_RADIUS) {
+            return None;
+        }
         let layers = photo.style_layers();
         Some(
             paintings
@@ -156,11 +164,13 @@ impl StyleTargets {
                 .enumerate()
                 .map(|(i, painting)| {
                     std::array::from_fn(|l| {
-                        let f = layers[l];
-                        let [b, c, h, w] = f.dims();
-                        let row = i.min(b - 1);
-                        let fi = f.clone().detach().slice([row..row + 1]).reshape([c, h * w]);
-                        candidates(fi, painting[l].clone(), radius)
+                        (radii[l] < UNGUIDED_RADIUS).then(|| {
+                            let f = layers[l];
+                            let [b, c, h, w] = f.dims();
+                            let row = i.min(b - 1);
+                            let fi = f.clone().detach().slice([row..row + 1]).reshape([c, h * w]);
+                            candidates(fi, painting[l].clone(), radii[l])
+                        })
                     })
                 })
                 .collect(),
@@ -180,18 +190,9 @@ impl StyleTargets {
                     for (i, painting) in paintings.iter().enumerate() {
                         let [_, c, h, w] = f.dims();
                         let fi = (*f).clone().slice([i..i + 1]).reshape([c, h * w]);
-                        let term = match guide {
-                            None => nnfm(fi, painting[l].clone()),
-                            Some(g) => {
-                                let matched = nearest_columns_among(
-                                    fi.clone(),
-                                    painting[l].clone(),
-                                    g[i][l].clone(),
-                                );
-                                cosine_distance(fi, matched)
-                            }
-                        }
-                        .div_scalar(paintings.len() as f32);
+                        let bias = guide.and_then(|g| g[i][l].clone());
+                        let term = nnfm_among(fi, painting[l].clone(), bias)
+                            .div_scalar(paintings.len() as f32);
                         total = Some(match total {
                             Some(t) => t + term,
                             None => term,
@@ -224,10 +225,13 @@ pub fn nearest_columns(features: Tensor<2>, painting: Tensor<2>) -> Tensor<2> {
 
 /// The nearest painting column to each feature, among those `bias` (if any) leaves.
 fn nearest(features: Tensor<2>, painting: Tensor<2>, bias: Option<Tensor<2>>) -> Tensor<2> {
-    let [_, n] = features.dims();
-    let sim = unit_columns(features.detach())
-        .transpose()
-        .matmul(painting.clone());
+    nearest_unit(unit_columns(features.detach()), painting, bias)
+}
+
+/// [`nearest`] of features already scaled to unit columns.
+fn nearest_unit(unit: Tensor<2>, painting: Tensor<2>, bias: Option<Tensor<2>>) -> Tensor<2> {
+    let [_, n] = unit.dims();
+    let sim = unit.detach().transpose().matmul(painting.clone());
     let sim = match bias {
         Some(b) => sim + b,
         None => sim,
@@ -260,19 +264,21 @@ pub fn nearest_columns_among(
     nearest(features, painting, Some(bias))
 }
 
-/// The mean over positions of 1 − cos(f_i, t_i), `features` and unit `targets` both `[C, N]`.
-pub fn cosine_distance(features: Tensor<2>, targets: Tensor<2>) -> Tensor<1> {
-    let [_, n] = features.dims();
-    let cos = (unit_columns(features) * targets).sum_dim(0).reshape([n]);
-    cos.neg().add_scalar(1.0).mean()
-}
-
 /// ARF's NNFM term of one image's features `[C, N]` against a painting's unit columns
 /// `[C, M]`: the mean over positions of 1 − cos(f_i, s_nn(i)), the nearest painting feature
 /// `nn(i)` (by cosine) chosen without gradient.
 pub fn nnfm(features: Tensor<2>, painting: Tensor<2>) -> Tensor<1> {
-    let matched = nearest_columns(features.clone(), painting);
-    cosine_distance(features, matched)
+    nnfm_among(features, painting, None)
+}
+
+/// [`nnfm`] with the matches among the candidates `bias` leaves (see [`candidates`]); the
+/// features are scaled to unit columns once, for the match and the distance both.
+fn nnfm_among(features: Tensor<2>, painting: Tensor<2>, bias: Option<Tensor<2>>) -> Tensor<1> {
+    let [_, n] = features.dims();
+    let unit = unit_columns(features);
+    let matched = nearest_unit(unit.clone(), painting, bias);
+    let cos = (unit * matched).sum_dim(0).reshape([n]);
+    cos.neg().add_scalar(1.0).mean()
 }
 
 #[cfg(test)]
@@ -407,8 +413,7 @@ mod tests {
         };
         let f = t2(&[&[1.0], &[0.5]], &d).require_grad();
         let guide = candidates(photo, s.clone(), 0.1);
-        let matched = nearest_columns_among(f.clone(), s.clone(), guide);
-        let g_guided = grad(cosine_distance(f.clone(), matched), &f);
+        let g_guided = grad(nnfm_among(f.clone(), s.clone(), Some(guide)), &f);
         let f = t2(&[&[1.0], &[0.5]], &d).require_grad();
         let g_nnfm = grad(nnfm(f.clone(), s), &f);
         // Descending: guided, the feature turns towards (0, 1); unguided, towards (1, 0).
@@ -435,7 +440,7 @@ mod tests {
         ] {
             let t = StyleTargets::from_images(kind, &vgg, std::slice::from_ref(&painting));
             assert_eq!(t.kind(), kind);
-            let guide = radius.and_then(|r| t.match_guide(&vgg.features(painting.clone()), r));
+            let guide = radius.and_then(|r| t.match_guide(&vgg.features(painting.clone()), [r; 4]));
             assert_eq!(guide.is_some(), radius.is_some());
             let same = t
                 .loss(&vgg.features(painting.clone()), guide.as_ref())

@@ -119,6 +119,12 @@ pub struct StyleArgs {
     #[arg(long)]
     #[serde(default = "legacy_match_radius")]
     pub match_radius: Option<f32>,
+    /// With nnfm: another radius for the texture layers (relu3_3, relu4_3), the strokes'
+    /// scale, while --match-radius holds at the palette layers (relu1_2, relu2_2), the
+    /// colours and edges that keep the objects readable. Default: the same as --match-radius.
+    #[arg(long)]
+    #[serde(default)]
+    pub texture_match_radius: Option<f32>,
     /// Style loss weight (default: per style loss and VGG preprocessing).
     #[arg(long)]
     pub style_weight: Option<f64>,

@@ -94,7 +94,8 @@ pub fn train<V: Variant>(
         let preprocess = vgg.preprocess;
         let s = V::style(&cfg);
         let mut loss = PerceptualLoss::new(vgg, &styles, s.style_size, s.loss(), &ad)
-            .with_match_radius(s.match_radius);
+            .with_match_radius(s.match_radius)
+            .with_texture_match_radius(s.texture_match_radius);
         if s.color_transfer {
             let data = match &start {
                 Start::Fresh(data) => data,
