@@ -16,6 +16,7 @@ use ins_models::consistency::{
     TEXTURE_LAYERS, content_features, score_frames, texture_distances,
 };
 use ins_models::stylize2d::Stylize2dSettings;
+use ins_scene::paths::PathKind;
 use serde_json::json;
 use vgg_import::Vgg;
 
@@ -40,10 +41,10 @@ pub struct EvalConsistency {
     /// A stylized NeRF or IDR run (written by `train nerf|idr --from`).
     #[arg(long)]
     pub run: PathBuf,
-    /// Camera path: spiral or turntable (default: spiral for forward-facing scenes, turntable
-    /// for the others).
+    /// Camera path: spiral, turntable or arc (default: spiral for forward-facing scenes, an
+    /// arc over the side a partial capture saw, such as DTU's, a turntable for the others).
     #[arg(long)]
-    pub path: Option<String>,
+    pub path: Option<PathKind>,
     /// Frames of the path.
     #[arg(long, default_value_t = 60)]
     pub frames: usize,
@@ -169,7 +170,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
 
     let size = a.size.as_deref().map(parse_size).transpose()?;
     let cameras: Vec<_> = pair
-        .cameras(a.path.as_deref(), a.frames)?
+        .cameras(a.path, a.frames)?
         .iter()
         .map(|c| crate::view_size::resized(c, size))
         .collect();
@@ -324,7 +325,7 @@ pub fn run(a: EvalConsistency) -> Result<()> {
         "pretrained_run": from,
         "painting": painting_path,
         "mix": ins_models::style_mix::normalized(styles.len(), Some(&mix))?,
-        "path": a.path.as_deref().unwrap_or(pair.default_path()),
+        "path": a.path.unwrap_or(pair.default_path()).name(),
         "frames": renders.cameras.len(),
         "size": [w, h],
         "ranges": RANGES,

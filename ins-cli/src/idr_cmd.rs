@@ -12,7 +12,7 @@ use ins_models::idr::eval::{evaluate_views, render_camera};
 use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
 use ins_models::run::RunKind;
 use ins_scene::camera::Camera;
-use ins_scene::paths::turntable_for_scene;
+use ins_scene::paths::{PathKind, default_kind, path_for_scene};
 
 use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
 use crate::vgg_cmd::VggArgs;
@@ -61,12 +61,13 @@ pub struct RenderIdr {
     /// Run folder written by `train idr`.
     #[arg(long)]
     run: PathBuf,
-    /// One view by index (default: a turntable, see --frames).
+    /// One view by index (default: the scene's path, see --path and --frames).
     #[arg(long)]
     view: Option<usize>,
-    /// A camera path: turntable.
+    /// A camera path: arc (over the side the capture saw; the default where the cameras leave
+    /// a side unseen, as DTU's do), turntable or spiral.
     #[arg(long, conflicts_with = "view")]
-    path: Option<String>,
+    path: Option<PathKind>,
     /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it).
     #[arg(long, conflicts_with_all = ["view", "path"])]
     orbit: Option<String>,
@@ -128,12 +129,9 @@ pub fn render(a: RenderIdr) -> Result<()> {
         println!("{}", a.out.display());
         return Ok(());
     }
-    match a.path.as_deref().unwrap_or("turntable") {
-        "turntable" => {}
-        other => bail!("unknown --path {other:?} (surfaces render on a turntable)"),
-    }
-    let cameras =
-        turntable_for_scene(&run.scene(), a.frames).context("the scene has no cameras")?;
+    let scene = run.scene();
+    let kind = a.path.unwrap_or(default_kind(&scene));
+    let cameras = path_for_scene(&scene, kind, a.frames).context("the scene has no cameras")?;
     let output = FrameOutput::for_path(&a.out)?;
     let mut frames = Vec::new();
     for (i, c) in cameras.iter().enumerate() {

@@ -12,7 +12,7 @@ use ins_models::nerf::{Nerf, NerfRun, NerfRunConfig};
 use ins_models::run::RunKind;
 use ins_scene::camera::Camera;
 use ins_scene::data::Split;
-use ins_scene::paths::{spiral_for_scene, turntable_for_scene};
+use ins_scene::paths::{PathKind, default_kind, path_for_scene};
 
 use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
 use crate::vgg_cmd::VggArgs;
@@ -78,9 +78,10 @@ pub struct Cameras {
     /// One view by index.
     #[arg(long)]
     view: Option<usize>,
-    /// A camera path: spiral (forward-facing scenes) or turntable (360° scenes).
+    /// A camera path: spiral (forward-facing scenes), turntable (scenes seen all around) or
+    /// arc (over the side a partial capture saw). Default: the scene's.
     #[arg(long)]
-    path: Option<String>,
+    path: Option<PathKind>,
     /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it).
     #[arg(long)]
     orbit: Option<String>,
@@ -163,7 +164,12 @@ pub fn render(a: RenderNerf) -> Result<()> {
             .map(|&i| (scene.views[i].camera.clone(), format!("{split}_{i:03}.png")))
             .unzip()
     } else {
-        let cams = path_cameras(&run, c.path.as_deref(), a.frames)?;
+        let cams = path_for_scene(
+            &run.scene(),
+            c.path.unwrap_or(default_kind(&run.scene())),
+            a.frames,
+        )
+        .context("the scene has no cameras to build a path from")?;
         let names = (0..cams.len())
             .map(|i| format!("frame_{i:04}.png"))
             .collect();
@@ -181,24 +187,6 @@ pub fn render(a: RenderNerf) -> Result<()> {
         println!("{}", w.display());
     }
     Ok(())
-}
-
-/// The path of a scene when none is asked for: the LLFF spiral for forward-facing scenes, a
-/// turntable for the others.
-pub fn default_path(run: &NerfRun) -> &'static str {
-    ins_scene::paths::default_kind(run.scene())
-}
-
-/// The cameras of a `--path` (spiral or turntable; default: spiral for forward-facing scenes,
-/// turntable for the others) of `frames` frames.
-pub fn path_cameras(run: &NerfRun, kind: Option<&str>, frames: usize) -> Result<Vec<Camera>> {
-    let scene = &run.scene();
-    match kind.unwrap_or(default_path(run)) {
-        "spiral" => spiral_for_scene(scene, frames),
-        "turntable" => turntable_for_scene(scene, frames),
-        other => bail!("unknown --path {other:?} (expected spiral or turntable)"),
-    }
-    .context("the scene has no cameras to build a path from")
 }
 
 #[derive(Args, Debug)]

@@ -16,7 +16,7 @@ use ins_core::train::RunFolder;
 use ins_scene::camera::Camera;
 use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
-use ins_scene::paths::{spiral_for_scene, turntable_for_scene};
+use ins_scene::paths::{PathKind, path_for_scene};
 use serde::Serialize;
 use vgg_import::Vgg;
 
@@ -215,20 +215,16 @@ impl StylizedPair {
         Ok(Self { student, teacher })
     }
 
-    /// The default path: the spiral for forward-facing scenes, a turntable for the others.
-    pub fn default_path(&self) -> &'static str {
+    /// The default path ([`ins_scene::paths::default_kind`]).
+    pub fn default_path(&self) -> PathKind {
         ins_scene::paths::default_kind(self.student.scene())
     }
 
     /// The cameras of a `kind` path (default: [`StylizedPair::default_path`]) of `frames`.
-    pub fn cameras(&self, kind: Option<&str>, frames: usize) -> Result<Vec<Camera>> {
+    pub fn cameras(&self, kind: Option<PathKind>, frames: usize) -> Result<Vec<Camera>> {
         let scene = self.student.scene();
-        match kind.unwrap_or(self.default_path()) {
-            "spiral" => spiral_for_scene(scene, frames),
-            "turntable" => turntable_for_scene(scene, frames),
-            other => bail!("unknown --path {other:?} (expected spiral or turntable)"),
-        }
-        .context("the scene has no cameras to build a path from")
+        path_for_scene(scene, kind.unwrap_or(self.default_path()), frames)
+            .context("the scene has no cameras to build a path from")
     }
 }
 

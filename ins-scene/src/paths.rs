@@ -1,5 +1,6 @@
-//! Render paths: a turntable around 360° scenes, the LLFF spiral for forward-facing scenes, and
-//! smooth interpolation between given cameras.
+//! Render paths: a turntable around 360° scenes, an arc over the side a partial capture saw
+//! (DTU's, a photographed object), the LLFF spiral for forward-facing scenes, and smooth
+//! interpolation between given cameras.
 
 use super::camera::{Camera, pose_from_back_up, pose_look_at};
 use super::geometry::{Mat3, Quat, Vec3, mat3_rows};
@@ -17,11 +18,24 @@ pub fn turntable(
     n: usize,
     template: &Camera,
 ) -> Vec<Camera> {
+    let azimuths = (0..n).map(|k| start + k as f32 / n as f32 * std::f32::consts::TAU);
+    orbit_cameras(center, up, radius, elevation, azimuths, template)
+}
+
+/// Cameras at azimuths `azimuths` (radians) of a circle around `center` (see [`turntable`]),
+/// looking at it.
+fn orbit_cameras(
+    center: Vec3,
+    up: Vec3,
+    radius: f32,
+    elevation: f32,
+    azimuths: impl Iterator<Item = f32>,
+    template: &Camera,
+) -> Vec<Camera> {
     let up = up.normalize_or_zero();
     let (e1, e2) = plane_basis(up);
-    (0..n)
-        .map(|k| {
-            let az = start + k as f32 / n as f32 * std::f32::consts::TAU;
+    azimuths
+        .map(|az| {
             let horizontal = e1 * az.cos() + e2 * az.sin();
             let dir = horizontal * elevation.cos() + up * elevation.sin();
             let eye = center + dir * radius;
@@ -31,6 +45,85 @@ pub fn turntable(
             }
         })
         .collect()
+}
+
+/// A capture whose cameras leave a gap of at least this much azimuth (radians, 90°) unseen is
+/// shown along an [`arc`] over the side it saw: a turntable would spend its frames on a side
+/// no photo constrains (DTU's captures span about 100°).
+pub const ARC_MIN_GAP: f32 = std::f32::consts::FRAC_PI_2;
+
+/// The arc of azimuths `azimuths` (radians, any order and range) cover: `(start, span)` with
+/// the arc from `start` counter-clockwise over `span`, the complement of the widest gap
+/// between neighbours; `None` when that gap is under `min_gap` (cameras all around) or there
+/// are no azimuths.
+pub fn covered_arc(azimuths: &[f32], min_gap: f32) -> Option<(f32, f32)> {
+    let tau = std::f32::consts::TAU;
+    let mut a: Vec<f32> = azimuths.iter().map(|x| x.rem_euclid(tau)).collect();
+    a.sort_by(|x, y| x.total_cmp(y));
+    let (first, last) = (*a.first()?, *a.last()?);
+    // The gap after each azimuth, the last one wrapping round to the first.
+    let (mut gap, mut after) = (first + tau - last, last);
+    for w in a.windows(2) {
+        if w[1] - w[0] > gap {
+            (gap, after) = (w[1] - w[0], w[0]);
+        }
+    }
+    (gap >= min_gap).then(|| ((after + gap).rem_euclid(tau), tau - gap))
+}
+
+/// `n` cameras sweeping the arc `(start, span)` of a circle (see [`turntable`]) there and back,
+/// easing at its ends, so that the path loops: azimuth `start + span·(1 − cos 2πk/n)/2`.
+pub fn arc(
+    center: Vec3,
+    up: Vec3,
+    radius: f32,
+    elevation: f32,
+    (start, span): (f32, f32),
+    n: usize,
+    template: &Camera,
+) -> Vec<Camera> {
+    let tau = std::f32::consts::TAU;
+    let azimuths =
+        (0..n).map(move |k| start + span * 0.5 * (1.0 - (tau * k as f32 / n as f32).cos()));
+    orbit_cameras(center, up, radius, elevation, azimuths, template)
+}
+
+/// The azimuths (radians, in [`plane_basis`]`(orbit.up)`) of a scene's training cameras.
+fn camera_azimuths(scene: &Scene, orbit: &SceneOrbit) -> Vec<f32> {
+    let (e1, e2) = plane_basis(orbit.up);
+    scene
+        .split(crate::data::Split::Train)
+        .iter()
+        .map(|&i| {
+            let v = scene.views[i].camera.origin() - orbit.center;
+            v.dot(e2).atan2(v.dot(e1))
+        })
+        .collect()
+}
+
+/// The arc of a scene's orbit its training cameras cover, where they leave a gap of at least
+/// [`ARC_MIN_GAP`]: `(start, span)` radians.
+pub fn capture_arc(scene: &Scene) -> Option<(f32, f32)> {
+    let (orbit, _) = scene_orbit(scene)?;
+    covered_arc(&camera_azimuths(scene, &orbit), ARC_MIN_GAP)
+}
+
+/// An [`arc`] over the side of a scene its training cameras saw; the turntable when they
+/// surround it. `None` without training views.
+pub fn arc_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
+    let (o, first) = scene_orbit(scene)?;
+    let Some(covered) = covered_arc(&camera_azimuths(scene, &o), ARC_MIN_GAP) else {
+        return turntable_for_scene(scene, n);
+    };
+    Some(arc(
+        o.center,
+        o.up,
+        o.radius,
+        o.elevation,
+        covered,
+        n,
+        first,
+    ))
 }
 
 /// The scene's up direction: the mean up vector of its training cameras (zero without any).
@@ -105,9 +198,51 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
 /// The path a scene is shown along by default ([`default_kind`]) with `n` frames; `None`
 /// without views.
 pub fn default_path(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
-    match default_kind(scene) {
-        "spiral" => spiral_for_scene(scene, n),
-        _ => turntable_for_scene(scene, n),
+    path_for_scene(scene, default_kind(scene), n)
+}
+
+/// A camera path around a scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathKind {
+    /// The LLFF spiral (forward-facing scenes).
+    Spiral,
+    /// A full circle around the scene.
+    Turntable,
+    /// There and back over the side the training cameras saw ([`arc_for_scene`]).
+    Arc,
+}
+
+impl PathKind {
+    /// The name `--path` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            PathKind::Spiral => "spiral",
+            PathKind::Turntable => "turntable",
+            PathKind::Arc => "arc",
+        }
+    }
+}
+
+impl std::str::FromStr for PathKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "spiral" => Ok(PathKind::Spiral),
+            "turntable" => Ok(PathKind::Turntable),
+            "arc" => Ok(PathKind::Arc),
+            other => Err(format!(
+                "unknown --path {other:?} (expected spiral, turntable or arc)"
+            )),
+        }
+    }
+}
+
+/// The `kind` path around `scene` with `n` frames; `None` without views.
+pub fn path_for_scene(scene: &Scene, kind: PathKind, n: usize) -> Option<Vec<Camera>> {
+    match kind {
+        PathKind::Spiral => spiral_for_scene(scene, n),
+        PathKind::Turntable => turntable_for_scene(scene, n),
+        PathKind::Arc => arc_for_scene(scene, n),
     }
 }
 
@@ -203,13 +338,16 @@ pub fn spiral_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
     Some(spiral(&cams, lo, hi, n, 2.0))
 }
 
-/// The path a scene is shown along when none is asked for: `"spiral"` for forward-facing
-/// scenes (LLFF, forward captures), `"turntable"` for the others.
-pub fn default_kind(scene: &Scene) -> &'static str {
+/// The path a scene is shown along when none is asked for: the spiral for forward-facing
+/// scenes (LLFF, forward captures), an arc over the side a partial capture saw (DTU), the
+/// turntable for scenes photographed all around (NeRF-synthetic).
+pub fn default_kind(scene: &Scene) -> PathKind {
     if scene.forward_facing {
-        "spiral"
+        PathKind::Spiral
+    } else if capture_arc(scene).is_some() {
+        PathKind::Arc
     } else {
-        "turntable"
+        PathKind::Turntable
     }
 }
 
@@ -280,4 +418,65 @@ fn percentile(mut v: Vec<f32>, q: f32) -> f32 {
     let lo = pos.floor() as usize;
     let hi = (lo + 1).min(v.len() - 1);
     v[lo] + (v[hi] - v[lo]) * (pos - lo as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_covered_arc_is_the_complement_of_the_widest_gap() {
+        let deg = |d: f32| d.to_radians();
+        // Cameras from −50° to 50° (given out of order, one past the wrap): 100° covered.
+        let (start, span) =
+            covered_arc(&[deg(10.0), deg(-50.0), deg(50.0), deg(310.0)], ARC_MIN_GAP)
+                .expect("a 260° gap");
+        assert!((start - deg(310.0)).abs() < 1e-5, "{}", start.to_degrees());
+        assert!((span - deg(100.0)).abs() < 1e-5, "{}", span.to_degrees());
+        // All around: every gap under 90°.
+        let ring: Vec<f32> = (0..8).map(|k| deg(45.0 * k as f32)).collect();
+        assert_eq!(covered_arc(&ring, ARC_MIN_GAP), None);
+        assert_eq!(covered_arc(&[], ARC_MIN_GAP), None);
+        // One camera: a gap of 360°, an arc of nothing.
+        let (_, span) = covered_arc(&[deg(30.0)], ARC_MIN_GAP).unwrap();
+        assert!(span.abs() < 1e-6);
+    }
+
+    #[test]
+    fn an_arc_goes_there_and_back_within_its_span() {
+        let identity = [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ];
+        let template = Camera::new(32, 32, 30.0, 30.0, 16.0, 16.0, identity);
+        let (start, span) = (0.3f32, 1.2f32);
+        let cams = arc(Vec3::ZERO, Vec3::Z, 2.0, 0.0, (start, span), 20, &template);
+        let (e1, e2) = plane_basis(Vec3::Z);
+        let az: Vec<f32> = cams
+            .iter()
+            .map(|c| {
+                let v = c.origin();
+                v.dot(e2).atan2(v.dot(e1))
+            })
+            .collect();
+        assert!((az[0] - start).abs() < 1e-4);
+        assert!(
+            (az[10] - (start + span)).abs() < 1e-4,
+            "the far end half way"
+        );
+        assert!(
+            az.iter()
+                .all(|&a| a >= start - 1e-4 && a <= start + span + 1e-4)
+        );
+        // Back the way it came: frame k and frame n − k coincide.
+        assert!((az[3] - az[17]).abs() < 1e-4);
+        for c in &cams {
+            assert!((c.origin().length() - 2.0).abs() < 1e-4);
+            assert!(
+                c.forward().dot(-c.origin().normalize()) > 0.999,
+                "looks at the centre"
+            );
+        }
+    }
 }

@@ -17,7 +17,10 @@ use ins_scene::data::synthetic::{self, SynthOptions, SynthScene};
 use ins_scene::data::{LoadOptions, Scene, SceneFormat, Split};
 use ins_scene::geometry::{Vec3, orthonormality_error};
 use ins_scene::patches::PatchSampler;
-use ins_scene::paths::{average_pose, interpolate, spiral_for_scene, turntable_for_scene};
+use ins_scene::paths::{
+    PathKind, average_pose, capture_arc, default_kind, interpolate, path_for_scene, plane_basis,
+    scene_orbit, spiral_for_scene, turntable_for_scene,
+};
 use ins_scene::rays::RaySampler;
 
 fn write(format: SceneFormat, size: u32, views: usize) -> (tempfile::TempDir, SynthScene) {

@@ -171,6 +171,40 @@ fn turntable_and_interpolation_paths() {
 }
 
 #[test]
+fn a_partial_capture_is_shown_along_the_arc_its_cameras_saw() {
+    // The synthetic DTU capture's cameras span 150° of azimuth; Blender's circle the object.
+    let (dir, _) = write(SceneFormat::Dtu, 16, 8);
+    let scene = load(dir.path());
+    assert_eq!(default_kind(&scene), PathKind::Arc);
+    let (start, span) = capture_arc(&scene).expect("a side unseen");
+    assert!(span > 100f32.to_radians() && span < 180f32.to_radians(), "{span}");
+    let (orbit, _) = scene_orbit(&scene).unwrap();
+    let (e1, e2) = plane_basis(orbit.up);
+    let azimuth = |p: Vec3| {
+        let v = p - orbit.center;
+        // Measured from the arc's start, counter-clockwise, in [0, 2π).
+        (v.dot(e2).atan2(v.dot(e1)) - start).rem_euclid(std::f32::consts::TAU)
+    };
+    // Every training camera lies on the arc, and so does every frame of the path.
+    for &i in &scene.train {
+        assert!(azimuth(scene.views[i].camera.origin()) <= span + 1e-4);
+    }
+    let path = path_for_scene(&scene, PathKind::Arc, 24).unwrap();
+    assert_eq!(path.len(), 24);
+    let along: Vec<f32> = path.iter().map(|c| azimuth(c.origin())).collect();
+    assert!(along.iter().all(|&a| a <= span + 1e-3), "{along:?}");
+    assert!(along[0] < 1e-3 && (along[12] - span).abs() < 1e-3, "{along:?}");
+    let (blender, _) = write(SceneFormat::Blender, 16, 6);
+    let blender = load(blender.path());
+    assert_eq!(default_kind(&blender), PathKind::Turntable);
+    assert_eq!(
+        path_for_scene(&blender, PathKind::Arc, 12).unwrap()[3].c2w,
+        turntable_for_scene(&blender, 12).unwrap()[3].c2w,
+        "cameras all around: the arc is the turntable"
+    );
+}
+
+#[test]
 fn plain_images_load_resize_and_give_a_grid() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("a.jpg");
