@@ -187,9 +187,9 @@ impl StyleArgs {
 /// How far (in cosine) from the photo's own best match NNFM may look for a position's match,
 /// by default. Unguided, NNFM painted real photos over or left them; guided, the strokes follow
 /// what the photo shows, more of the painting the wider the radius. On DTU scan37 with *The
-/// Starry Night*, texture transfer 0.13 / 0.33 / 0.39 / 0.55 at 0.05 / 0.15 / 0.2 / 0.3 and
-/// 0.63 unguided, the objects readable up to 0.2 and gone unguided (docs/measurements.md, "NNFM
-/// guided by the photo").
+/// Starry Night*, texture transfer 0.30 / 0.63 / 0.88 / 1.09 at 0.05 / 0.15 / 0.2 / 0.3 and
+/// 1.21 unguided (along the arc its photos cover), the objects readable up to 0.2 and gone
+/// unguided (docs/measurements.md, "scan37 measured on the side its photos saw").
 pub const DEFAULT_MATCH_RADIUS: f32 = 0.2;
 
 /// The size of the SIM a scene run adds when it stylizes.
