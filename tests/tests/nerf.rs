@@ -190,6 +190,50 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
     // the IDR test holds the whole mix. Open in issue 27.
     ins_tests::assert_moved(&to_first, true, "the distance to the stripes");
     ins_tests::assert_moved(&to_second, false, "the distance to the blotches");
+
+    // Deferred back-propagation through the trainer: the patch's 576 rays back-propagated in
+    // chunks of 200, the density stylized too (so the geometry term goes through the chunks),
+    // against the same run back-propagated directly (the same patches; the samples of chunks
+    // after the first are jittered differently).
+    let metrics = |chunk: usize| {
+        let out_dir = dir.path().join(format!("chunk{chunk}"));
+        let mut cfg = st_cfg.clone();
+        cfg.style.styles.truncate(1);
+        cfg.schedule.steps = 80;
+        cfg.backprop_chunk = chunk;
+        cfg.stylize_density = true;
+        let out = train::<Nerf>(&cfg, Some(vgg.clone()), &device, quiet_options(&out_dir));
+        assert!(out.unwrap().finished);
+        let log = std::fs::read_to_string(out_dir.join("metrics.jsonl")).unwrap();
+        let records: Vec<serde_json::Value> = log
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .filter(|v: &serde_json::Value| v.get("style").is_some())
+            .collect();
+        // Logged every 10 steps: the first three records and the last three.
+        assert!(records.len() >= 6, "{} records", records.len());
+        let mean = |r: &[serde_json::Value], k: &str| {
+            r.iter().map(|v| v[k].as_f64().unwrap()).sum::<f64>() / r.len() as f64
+        };
+        let last = &records[records.len() - 3..];
+        (
+            mean(&records[..3], "style"),
+            mean(last, "style"),
+            mean(last, "geometry"),
+        )
+    };
+    let direct = metrics(4096);
+    let deferred = metrics(200);
+    eprintln!("style first → last, geometry: direct {direct:?}, deferred {deferred:?}");
+    assert!(
+        deferred.1 < deferred.0,
+        "the style term did not fall: {deferred:?}"
+    );
+    assert!(
+        (deferred.1 - direct.1).abs() < 0.03 * direct.1,
+        "deferred {deferred:?} against direct {direct:?}"
+    );
+    assert!(deferred.2.is_finite() && deferred.2 > 0.0 && deferred.2 < 10.0 * direct.2 + 1e-6);
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! What a variant tells the trainer: the loss terms of a step, for the phase's objective.
 
 use anyhow::Result;
+use burn::optim::GradientsParams;
 use burn::prelude::*;
 
 use super::groups::Optimizable;
@@ -29,6 +30,10 @@ pub struct LossTerms {
     /// Logged numbers computed from a term's value once the trainer has read it (e.g. PSNR
     /// from MSE), so the task does not read the term a second time.
     pub derived: Vec<Derived>,
+    /// Parameter gradients the task back-propagated itself, in pieces (deferred
+    /// back-propagation): the trainer adds those of the weighted terms still tracked (none, if
+    /// the task gave their values only) and steps with the sum.
+    pub gradients: Option<GradientsParams>,
 }
 
 /// A logged number derived from a term: (its name, the term's name, the function of the
@@ -39,6 +44,12 @@ impl LossTerms {
     /// Adds a term.
     pub fn term(mut self, name: &'static str, value: Tensor<1>) -> Self {
         self.terms.push((name, value));
+        self
+    }
+
+    /// Sets the gradients the task took itself (see [`LossTerms::gradients`]).
+    pub fn with_gradients(mut self, gradients: GradientsParams) -> Self {
+        self.gradients = Some(gradients);
         self
     }
 

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::module::{Module, ModuleVisitor, Param};
-use burn::optim::{GradientsParams, ModuleOptimizer};
+use burn::optim::{GradientsAccumulator, GradientsParams, ModuleOptimizer};
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -192,7 +192,7 @@ impl<O: Objective> Trainer<O> {
                 && step > start
                 && step.is_multiple_of(self.opts.checkpoint_every);
             let task_state = if due { Some(task.save_state()?) } else { None };
-            let terms = task.losses(&model, &ctx)?;
+            let mut terms = task.losses(&model, &ctx)?;
             check_declared(&terms, phase, task.terms(phase.objective))?;
             let values = StepValues::read(&terms, phase, step, lr, || store.latest_path())?;
             // Parameters that produced a finite loss are the ones checkpointed.
@@ -203,7 +203,16 @@ impl<O: Objective> Trainer<O> {
             }
             // A loss no parameter reaches (an IDR patch whose rays all missed the surface) has
             // nothing to teach: the step is logged and the parameters and Adam stay as they are.
-            model = update(model, &mut optim, &groups, phase, lr, &values.total);
+            let deferred = terms.gradients.take();
+            model = update(
+                model,
+                &mut optim,
+                &groups,
+                phase,
+                lr,
+                &values.total,
+                deferred,
+            );
             if let Some(first) = &self.opts.first_step {
                 first.done();
             }
@@ -337,8 +346,9 @@ impl<O: Objective> Trainer<O> {
     }
 }
 
-/// Back-propagates a step's weighted total and takes the Adam step with the phase's learning
-/// rates. A total no parameter reaches (an IDR patch whose rays all missed the surface) has
+/// Back-propagates a step's weighted total, adds the gradients the task took itself
+/// (`deferred`), and takes the Adam step with the phase's learning rates. A total no parameter
+/// reaches (an IDR patch whose rays all missed the surface), with none taken by the task, has
 /// nothing to teach: the parameters and Adam stay as they are.
 fn update<M: Module>(
     model: M,
@@ -347,11 +357,20 @@ fn update<M: Module>(
     phase: &Phase<impl Objective>,
     lr: f64,
     total: &Tensor<1>,
+    deferred: Option<GradientsParams>,
 ) -> M {
-    if !total.is_tracked() {
-        return model;
-    }
-    let grads = GradientsParams::from_grads(total.clone().backward(), &model);
+    let direct = || GradientsParams::from_grads(total.clone().backward(), &model);
+    let grads = match (total.is_tracked(), deferred) {
+        (false, None) => return model,
+        (true, None) => direct(),
+        (false, Some(deferred)) => deferred,
+        (true, Some(deferred)) => {
+            let mut sum = GradientsAccumulator::<M>::new();
+            sum.accumulate(&model, deferred);
+            sum.accumulate(&model, direct());
+            sum.grads()
+        }
+    };
     optim.step(groups.learning_rates(lr, &phase.groups), model, grads)
 }
 
@@ -400,7 +419,7 @@ impl<O: Objective> Stepper<O> {
             seed: step_seed(0, self.step),
         };
         let lr = self.phase.lr.at(self.step);
-        let terms = task.losses(&model, &ctx)?;
+        let mut terms = task.losses(&model, &ctx)?;
         let values = StepValues::read(&terms, &self.phase, self.step, lr, || None)?;
         let model = update(
             model,
@@ -409,6 +428,7 @@ impl<O: Objective> Stepper<O> {
             &self.phase,
             lr,
             &values.total,
+            terms.gradients.take(),
         );
         let mut metrics = terms.metrics.clone();
         metrics.extend(task.after_step(&model, &ctx)?);

@@ -77,6 +77,13 @@ pub struct NerfRunConfig {
     /// followed the strokes, broke the depth and erased the fern (docs/measurements.md).
     #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
     pub stylize_density: bool,
+    /// Stylization: rays per chunk of deferred back-propagation (ARF's). A patch with more
+    /// rays than this is rendered once without a graph, the loss's gradient taken at its
+    /// pixels, then rendered again chunk by chunk, each chunk back-propagating its share: a
+    /// full-view patch (`--patch 200 --stride 1`) then costs a chunk's memory. The default
+    /// patch (64², 4096 rays) runs directly.
+    #[arg(long, default_value_t = 4096)]
+    pub backprop_chunk: usize,
 }
 
 impl Default for NerfRunConfig {

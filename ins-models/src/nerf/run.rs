@@ -193,6 +193,7 @@ impl Variant for Nerf {
                         .stylize_density
                         .then(|| base.model.field.geometry.to_device(device).no_grad()),
                     patch,
+                    backprop_chunk: cfg.backprop_chunk,
                 };
                 let eval = eval_schedule(cfg, &scene, folder);
                 Ok(NerfTask::new(

@@ -19,6 +19,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+use super::deferred::PatchRender;
 use super::eval::{evaluate_views, save_eval_picture};
 use super::model::NerfModel;
 use super::render::{RenderRays, Rendered, Sampling, render};
@@ -66,6 +67,9 @@ pub struct Stylization {
     pub teacher: Option<Geometry>,
     /// Patch geometry.
     pub patch: PatchSpec,
+    /// Patches of more rays than this are back-propagated in chunks of this many
+    /// ([`deferred`](super::deferred)).
+    pub backprop_chunk: usize,
 }
 
 /// The self-distilled geometry loss: mean |σ_student − σ_teacher| of the raw densities `[S, N]`
@@ -233,7 +237,12 @@ impl NerfTask {
         Ok(terms)
     }
 
-    fn stylize_losses(&mut self, model: &NerfModel, seed: u64) -> Result<LossTerms> {
+    fn stylize_losses(
+        &mut self,
+        model: &NerfModel,
+        step: &StepContext<NerfObjective>,
+    ) -> Result<LossTerms> {
+        let seed = step.seed;
         let style = self
             .style
             .as_ref()
@@ -244,6 +253,48 @@ impl NerfTask {
         let k = spec.size as usize;
         let rays = RenderRays::from_batch(&self.scene, &patch.batch);
         let perceptual = &style.perceptual;
+        let photo = photo_patch(&patch.batch.rgb, k, &self.device);
+        let content_target = perceptual.content_target(photo);
+        let styles = perceptual.n_styles();
+        self.last_rays = k * k;
+        if k * k > style.backprop_chunk {
+            let patch_render = PatchRender {
+                rays: &rays,
+                sampling: self.sampling(),
+                codes: &perceptual.codes,
+                background: self.background,
+                seed,
+                chunk: style.backprop_chunk,
+            };
+            let weight = |term: &str| step.phase.weight_of(term);
+            let mut terms = None;
+            let loss = |pixels: Tensor<2>| {
+                let (s, c) = perceptual.terms(patch_images(pixels, styles, k), &content_target);
+                let total =
+                    s.clone().mul_scalar(weight("style")) + c.clone().mul_scalar(weight("content"));
+                terms = Some((s.detach(), c.detach()));
+                total
+            };
+            // The geometry term's mean over all samples, as each chunk's share of it.
+            let mut geometry_sum = Tensor::<1>::zeros([1], &self.device);
+            let geometry = |out: &Rendered, all: usize| {
+                let teacher = style.teacher.as_ref()?;
+                let share = out.samples as f32 / all.max(1) as f32;
+                let mean = geometry_loss(teacher, out.points.clone(), out.raw.clone());
+                geometry_sum = geometry_sum.clone() + mean.clone().detach().mul_scalar(share);
+                Some(mean.mul_scalar(weight("geometry") * share as f64))
+            };
+            let (gradients, _, samples) =
+                patch_render.backward(model, &self.device, loss, geometry);
+            self.last_samples = samples;
+            let (style_term, content_term) = terms.context("the loss was not evaluated")?;
+            return Ok(LossTerms::default()
+                .term("style", style_term)
+                .term("content", content_term)
+                .term("geometry", geometry_sum)
+                .with_gradients(gradients)
+                .metric("samples_per_ray", samples as f64 / (k * k) as f64));
+        }
         let out: Rendered = render(
             model,
             &rays,
@@ -254,10 +305,7 @@ impl NerfTask {
             &self.device,
         );
         self.last_samples = out.samples;
-        self.last_rays = k * k;
-        let images = patch_images(out.fine.rgb, perceptual.n_styles(), k);
-        let photo = photo_patch(&patch.batch.rgb, k, &self.device);
-        let content_target = perceptual.content_target(photo);
+        let images = patch_images(out.fine.rgb, styles, k);
         let (style_term, content_term) = perceptual.terms(images, &content_target);
         let geometry = match &style.teacher {
             Some(teacher) => geometry_loss(teacher, out.points, out.raw),
@@ -355,7 +403,7 @@ impl Task for NerfTask {
     ) -> Result<LossTerms> {
         match step.phase.objective {
             NerfObjective::Pretrain => self.pretrain_losses(model, step.seed),
-            NerfObjective::Stylize => self.stylize_losses(model, step.seed),
+            NerfObjective::Stylize => self.stylize_losses(model, step),
         }
     }
 

@@ -177,7 +177,10 @@ fn a_partial_capture_is_shown_along_the_arc_its_cameras_saw() {
     let scene = load(dir.path());
     assert_eq!(default_kind(&scene), PathKind::Arc);
     let (start, span) = capture_arc(&scene).expect("a side unseen");
-    assert!(span > 100f32.to_radians() && span < 180f32.to_radians(), "{span}");
+    assert!(
+        span > 100f32.to_radians() && span < 180f32.to_radians(),
+        "{span}"
+    );
     let (orbit, _) = scene_orbit(&scene).unwrap();
     let (e1, e2) = plane_basis(orbit.up);
     let azimuth = |p: Vec3| {
@@ -193,7 +196,10 @@ fn a_partial_capture_is_shown_along_the_arc_its_cameras_saw() {
     assert_eq!(path.len(), 24);
     let along: Vec<f32> = path.iter().map(|c| azimuth(c.origin())).collect();
     assert!(along.iter().all(|&a| a <= span + 1e-3), "{along:?}");
-    assert!(along[0] < 1e-3 && (along[12] - span).abs() < 1e-3, "{along:?}");
+    assert!(
+        along[0] < 1e-3 && (along[12] - span).abs() < 1e-3,
+        "{along:?}"
+    );
     let (blender, _) = write(SceneFormat::Blender, 16, 6);
     let blender = load(blender.path());
     assert_eq!(default_kind(&blender), PathKind::Turntable);
