@@ -12,7 +12,7 @@ use ins_models::idr::eval::{evaluate_views, render_camera};
 use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
 use ins_models::run::RunKind;
 use ins_scene::camera::Camera;
-use ins_scene::paths::{PathKind, default_kind, path_for_scene};
+use ins_scene::paths::{PathKind, path_for_scene};
 
 use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
 use crate::vgg_cmd::VggArgs;
@@ -129,9 +129,8 @@ pub fn render(a: RenderIdr) -> Result<()> {
         println!("{}", a.out.display());
         return Ok(());
     }
-    let scene = run.scene();
-    let kind = a.path.unwrap_or(default_kind(&scene));
-    let cameras = path_for_scene(&scene, kind, a.frames).context("the scene has no cameras")?;
+    let cameras =
+        path_for_scene(&run.scene(), a.path, a.frames).context("the scene has no cameras")?;
     let output = FrameOutput::for_path(&a.out)?;
     let mut frames = Vec::new();
     for (i, c) in cameras.iter().enumerate() {

@@ -12,7 +12,7 @@ use ins_models::nerf::{Nerf, NerfRun, NerfRunConfig};
 use ins_models::run::RunKind;
 use ins_scene::camera::Camera;
 use ins_scene::data::Split;
-use ins_scene::paths::{PathKind, default_kind, path_for_scene};
+use ins_scene::paths::{PathKind, path_for_scene};
 
 use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
 use crate::vgg_cmd::VggArgs;
@@ -164,12 +164,8 @@ pub fn render(a: RenderNerf) -> Result<()> {
             .map(|&i| (scene.views[i].camera.clone(), format!("{split}_{i:03}.png")))
             .unzip()
     } else {
-        let cams = path_for_scene(
-            &run.scene(),
-            c.path.unwrap_or(default_kind(&run.scene())),
-            a.frames,
-        )
-        .context("the scene has no cameras to build a path from")?;
+        let cams = path_for_scene(&run.scene(), c.path, a.frames)
+            .context("the scene has no cameras to build a path from")?;
         let names = (0..cams.len())
             .map(|i| format!("frame_{i:04}.png"))
             .collect();

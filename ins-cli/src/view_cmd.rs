@@ -307,7 +307,7 @@ impl Viewer {
                 .unwrap_or(60)
                 .clamp(2, 720);
             let scene = run.scene();
-            let cams = ins_scene::paths::default_path(scene, frames)
+            let cams = ins_scene::paths::path_for_scene(scene, None, frames)
                 .context("the scene has no cameras")?;
             let code = run.code(
                 if req.mix.is_empty() {

@@ -223,8 +223,7 @@ impl StylizedPair {
     /// The cameras of a `kind` path (default: [`StylizedPair::default_path`]) of `frames`.
     pub fn cameras(&self, kind: Option<PathKind>, frames: usize) -> Result<Vec<Camera>> {
         let scene = self.student.scene();
-        path_for_scene(scene, kind.unwrap_or(self.default_path()), frames)
-            .context("the scene has no cameras to build a path from")
+        path_for_scene(scene, kind, frames).context("the scene has no cameras to build a path from")
     }
 }
 

@@ -195,12 +195,6 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
     ))
 }
 
-/// The path a scene is shown along by default ([`default_kind`]) with `n` frames; `None`
-/// without views.
-pub fn default_path(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
-    path_for_scene(scene, default_kind(scene), n)
-}
-
 /// A camera path around a scene.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PathKind {
@@ -237,9 +231,10 @@ impl std::str::FromStr for PathKind {
     }
 }
 
-/// The `kind` path around `scene` with `n` frames; `None` without views.
-pub fn path_for_scene(scene: &Scene, kind: PathKind, n: usize) -> Option<Vec<Camera>> {
-    match kind {
+/// The `kind` path around `scene` with `n` frames (`None`: the scene's [`default_kind`]);
+/// `None` without views.
+pub fn path_for_scene(scene: &Scene, kind: Option<PathKind>, n: usize) -> Option<Vec<Camera>> {
+    match kind.unwrap_or_else(|| default_kind(scene)) {
         PathKind::Spiral => spiral_for_scene(scene, n),
         PathKind::Turntable => turntable_for_scene(scene, n),
         PathKind::Arc => arc_for_scene(scene, n),

@@ -192,7 +192,7 @@ fn a_partial_capture_is_shown_along_the_arc_its_cameras_saw() {
     for &i in &scene.train {
         assert!(azimuth(scene.views[i].camera.origin()) <= span + 1e-4);
     }
-    let path = path_for_scene(&scene, PathKind::Arc, 24).unwrap();
+    let path = path_for_scene(&scene, Some(PathKind::Arc), 24).unwrap();
     assert_eq!(path.len(), 24);
     let along: Vec<f32> = path.iter().map(|c| azimuth(c.origin())).collect();
     assert!(along.iter().all(|&a| a <= span + 1e-3), "{along:?}");
@@ -204,7 +204,7 @@ fn a_partial_capture_is_shown_along_the_arc_its_cameras_saw() {
     let blender = load(blender.path());
     assert_eq!(default_kind(&blender), PathKind::Turntable);
     assert_eq!(
-        path_for_scene(&blender, PathKind::Arc, 12).unwrap()[3].c2w,
+        path_for_scene(&blender, Some(PathKind::Arc), 12).unwrap()[3].c2w,
         turntable_for_scene(&blender, 12).unwrap()[3].c2w,
         "cameras all around: the arc is the turntable"
     );
