@@ -113,15 +113,16 @@ fn train_render_eval_export_and_refuse_bad_input() {
     );
     assert!(head.contains("property uchar red"), "{head}");
 
-    // Bad input: a Blender scene, a scene without masks, a NeRF run, an absurd resolution.
-    let blender = dir.path().join("blender");
+    // Bad input: a forward-facing scene, a scene without masks, a NeRF run, an absurd
+    // resolution.
+    let llff = dir.path().join("llff");
     ok(cli(&[
         "data",
         "synth",
         "--format",
-        "blender",
+        "llff",
         "--out",
-        s(&blender),
+        s(&llff),
         "--size",
         "16",
         "--views",
@@ -131,11 +132,11 @@ fn train_render_eval_export_and_refuse_bad_input() {
         "train",
         "idr",
         "--scene",
-        s(&blender),
+        s(&llff),
         "--out",
         s(&dir.path().join("x")),
     ]);
-    assert_clean_failure(&o, "DTU");
+    assert_clean_failure(&o, "forward-facing");
     let unmasked = dir.path().join("unmasked");
     ok(cli(&[
         "data",

@@ -16,6 +16,7 @@ use super::config::IdrRunConfig;
 use super::eval::{evaluate_views, save_pictures};
 use super::model::IdrModel;
 use super::task::{IdrObjective, IdrTask, SurfaceStylization};
+use crate::run::scene_frame::{check_scene_frame, write_scene_frame};
 use crate::run::{Run, RunKind, Start, StyleArgs, Variant};
 
 /// IDR + INS.
@@ -33,8 +34,11 @@ pub const PATCH_SHARE: f32 = 0.5;
 /// moved.
 pub const BLEND_LR_MULT: f64 = 10.0;
 
-/// Loads a DTU/IDR scene for surface reconstruction: the format must be DTU (unit-sphere frame
-/// and masks), masks must exist unless `no_mask`, and every `holdout`-th view goes to val.
+/// Loads a scene for surface reconstruction, in the unit-sphere frame IDR works in: DTU ships
+/// it; an object captured from around it (COLMAP, transforms.json, NeRF-synthetic) is placed
+/// there from its masks' visual hull (`ins_scene::data::unit_sphere`), or from its cameras
+/// alone with `no_mask`. Masks must exist unless `no_mask`, and every `holdout`-th view goes
+/// to val (0: the format's own hold-out).
 pub fn load_scene(
     path: &Path,
     downscale: u32,
@@ -43,19 +47,32 @@ pub fn load_scene(
     no_mask: bool,
 ) -> Result<(Scene, u32)> {
     let format = detect_format(path)?;
-    if format != SceneFormat::Dtu {
+    if format == SceneFormat::Llff {
         bail!(
-            "{}: IDR reconstructs surfaces from DTU/IDR scenes (cameras.npz with a unit-sphere scale_mat, image/, mask/); this is a {format} scene — train a NeRF on it instead (`ins-cli train nerf`)",
+            "{}: IDR reconstructs the surface of an object photographed from around it; this is a forward-facing {format} scene — train a NeRF on it instead (`ins-cli train nerf`)",
             path.display()
         );
     }
-    let (mut scene, _, factor) = crate::run::scene::load_scene(path, downscale, images)?;
-    if !no_mask && !scene.views.iter().all(|v| v.mask.is_some()) {
+    let (scene, _, factor) = crate::run::scene::load_scene(path, downscale, images)?;
+    let masked = scene.views.iter().all(|v| v.mask.is_some());
+    if !no_mask && !masked {
         bail!(
-            "{}: IDR needs an object mask per view (mask/ folder); pass --no-mask to train without them (colour only on the whole image, a weaker surface)",
-            path.display()
+            "{}: IDR needs an object mask per view ({}); pass --no-mask to train without them (colour only on the whole image, a weaker surface)",
+            path.display(),
+            match format {
+                SceneFormat::Dtu => "a mask/ folder",
+                SceneFormat::Colmap =>
+                    "a masks/ folder beside images/, NAME.png for each photo NAME",
+                SceneFormat::Transforms => "a mask_path in each frame of transforms.json",
+                _ => "an alpha channel in each image",
+            }
         );
     }
+    let mut scene = if format == SceneFormat::Dtu {
+        scene
+    } else {
+        ins_scene::data::unit_sphere::into_unit_sphere(scene, !no_mask)?.0
+    };
     if holdout > 0 {
         let all: Vec<usize> = (0..scene.views.len()).collect();
         scene.val = all.iter().copied().filter(|i| i % holdout == 0).collect();
@@ -115,6 +132,10 @@ impl Variant for Idr {
         )?;
         cfg.source.downscale = factor;
         Ok(scene)
+    }
+
+    fn check_data(data: &Scene, field_run: &RunFolder) -> Result<()> {
+        check_scene_frame(data, &field_run.scene_frame())
     }
 
     fn palette(data: &Scene, max: usize) -> Vec<[f32; 3]> {
@@ -179,6 +200,7 @@ impl Variant for Idr {
     ) -> Result<IdrTask> {
         match start {
             Start::Fresh(scene) => {
+                write_scene_frame(&scene, &folder.scene_frame())?;
                 let views = scene.split(Split::Val).to_vec();
                 pretrain_task(cfg, scene, views, folder.val_dir(), device)
             }

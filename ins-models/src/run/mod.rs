@@ -11,6 +11,7 @@
 pub mod args;
 pub mod lifecycle;
 pub mod scene;
+pub mod scene_frame;
 pub mod variant;
 
 pub use args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};

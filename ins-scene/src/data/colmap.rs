@@ -5,6 +5,11 @@
 //! centre is `−Rᵀ t` and its camera-to-world rotation `Rᵀ`, turned to OpenGL axes by flipping
 //! the y and z columns. Images are listed by name, as `images.txt` readers conventionally do, so
 //! the hold-out is the same however COLMAP numbered them.
+//!
+//! Object masks, where a workspace has them, are in `masks/` beside the photos, named as
+//! COLMAP's own `--ImageReader.mask_path` reads them (`NAME.png` for the photo `NAME`) or with
+//! the photo's stem (`frame_001.png` for `frame_001.jpg`); a `masks/` folder that lacks a
+//! photo's mask is an error naming it.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -91,6 +96,10 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         .enumerate()
         .map(|(i, p)| (p.id, i))
         .collect();
+    let mask_dir = image_dir
+        .parent()
+        .map(|p| p.join("masks"))
+        .filter(|d| d.is_dir());
     let mut images: Vec<&ColmapImage> = model.images.iter().collect();
     images.sort_by(|a, b| a.name.cmp(&b.name));
     let mut frames = Vec::with_capacity(images.len());
@@ -116,10 +125,19 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
                 format!("the photo of {origin} in {}", images_file.display()),
             ));
         }
+        let mask = match &mask_dir {
+            Some(d) => Some(mask_file(d, &img.name).ok_or_else(|| {
+                DataError::missing(
+                    &d.join(format!("{}.png", img.name)),
+                    format!("the mask of {origin} (the workspace has a masks/ folder)"),
+                )
+            })?),
+            None => None,
+        };
         let (intrinsics, distortion) = cam.intrinsics();
         frames.push(Frame {
             image: path,
-            mask: None,
+            mask,
             size: (cam.width, cam.height),
             intrinsics,
             distortion,
@@ -159,6 +177,19 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         None,
         opts,
     )
+}
+
+/// The mask of the photo `name` in `dir`: `NAME.png` (COLMAP's convention), else the photo's
+/// stem with `.png`, else the same file name.
+fn mask_file(dir: &Path, name: &str) -> Option<PathBuf> {
+    let stem = Path::new(name).with_extension("png");
+    [
+        dir.join(format!("{name}.png")),
+        dir.join(stem),
+        dir.join(name),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
 }
 
 /// `images/` in the workspace, else beside the model folder's parent chain (`sparse/0/../../images`).

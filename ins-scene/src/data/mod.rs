@@ -24,6 +24,7 @@ pub mod ply_points;
 pub mod scene;
 pub mod synthetic;
 pub mod transforms;
+pub mod unit_sphere;
 
 use std::path::Path;
 

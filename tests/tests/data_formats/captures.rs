@@ -5,6 +5,7 @@
 use ins_scene::data::colmap::image_pose;
 use ins_scene::data::colmap_model::{Encoding, read_model};
 use ins_scene::data::synthetic::{CaptureLayout, write_colmap, write_transforms};
+use ins_scene::geometry::Bounds;
 
 use super::bad_inputs::{assert_names, load_err};
 use super::*;
@@ -368,4 +369,117 @@ fn bad_transforms_inputs_are_errors_naming_the_file() {
     assert_names(&load_err(d.path()), "nowhere.png");
     std::fs::write(&json, &good[..good.len() / 2]).unwrap();
     assert_names(&load_err(d.path()), "transforms.json");
+}
+
+/// The capture's foreground surface points in its scene frame: every masked pixel's ray run to
+/// its rendered depth.
+fn object_points(scene: &Scene, synth: &SynthScene) -> Vec<Vec3> {
+    let mut out = Vec::new();
+    for (v, gt) in scene.views.iter().zip(&synth.views) {
+        for (i, &t) in gt.render.depth.iter().enumerate() {
+            if t.is_finite() && gt.render.mask[i] {
+                let (x, y) = (i as u32 % v.camera.width, i as u32 / v.camera.width);
+                let (o, d) = v.camera.pixel_ray(x, y);
+                out.push(o + d * t * scene.to_scene.scale);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn masked_captures_are_placed_in_the_unit_sphere_from_their_visual_hull() {
+    use ins_scene::data::unit_sphere::{SPHERE_MARGIN, UNMASKED_CAMERA_DISTANCE, into_unit_sphere};
+    for (format, enc) in [
+        (SceneFormat::Colmap, Encoding::Binary),
+        (SceneFormat::Transforms, Encoding::Binary),
+    ] {
+        let (dir, synth) = capture(format, CaptureLayout::ObjectCentred, enc);
+        let scene = load(dir.path());
+        assert!(
+            scene.views.iter().all(|v| v.mask.is_some()),
+            "{format}: masks read"
+        );
+        let (unit, sphere) = into_unit_sphere(scene.clone(), true).unwrap();
+        assert!(sphere.from_masks);
+        // The rays are the generating cameras' in the new frame too.
+        assert_rays_equal_generating_cameras(&unit, &synth);
+        // Every point of the objects lies inside the unit sphere, and the sphere is tight:
+        // the farthest lies past the margin's share of the radius less the hull's slack.
+        let points = object_points(&unit, &synth);
+        let reach = points.iter().map(|p| p.length()).fold(0.0f32, f32::max);
+        assert!(reach < 1.0, "{format}: an object point at radius {reach}");
+        assert!(
+            reach > 0.6 / SPHERE_MARGIN,
+            "{format}: objects reach only {reach}"
+        );
+        // Cameras outside, rays cut to the sphere, nothing contracted.
+        assert!(unit.views.iter().all(|v| v.camera.origin().length() > 1.0));
+        assert!(unit.per_ray_range && unit.contraction.is_none());
+        assert!(matches!(unit.bounds, Bounds::Sphere { radius, .. } if radius == 1.0));
+        // Without masks: centred where the cameras look, the cameras DTU's distance away.
+        let (bare, sphere) = into_unit_sphere(scene, false).unwrap();
+        assert!(!sphere.from_masks);
+        let mean = bare
+            .views
+            .iter()
+            .map(|v| v.camera.origin().length())
+            .sum::<f32>()
+            / bare.views.len() as f32;
+        assert!(
+            (mean - UNMASKED_CAMERA_DISTANCE).abs() < 1e-4,
+            "mean distance {mean}"
+        );
+        let reach = object_points(&bare, &synth)
+            .iter()
+            .map(|p| p.length())
+            .fold(0.0f32, f32::max);
+        assert!(
+            reach < 1.0,
+            "{format} without masks: an object point at {reach}"
+        );
+    }
+}
+
+#[test]
+fn masks_that_agree_on_nothing_or_a_forward_capture_cannot_be_placed() {
+    use ins_scene::data::unit_sphere::into_unit_sphere;
+    let (dir, _) = capture(
+        SceneFormat::Transforms,
+        CaptureLayout::ObjectCentred,
+        Encoding::Binary,
+    );
+    // Every mask empty: no point is held by the masks.
+    for entry in std::fs::read_dir(dir.path().join("masks")).unwrap() {
+        let p = entry.unwrap().path();
+        image::GrayImage::new(40, 30).save(&p).unwrap();
+    }
+    let err = into_unit_sphere(load(dir.path()), true)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("agree on no point"), "{err}");
+    assert_names(&err, &dir.path().display().to_string());
+    let (dir, _) = capture(
+        SceneFormat::Colmap,
+        CaptureLayout::ForwardFacing,
+        Encoding::Binary,
+    );
+    let err = into_unit_sphere(load(dir.path()), true)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("forward-facing"), "{err}");
+}
+
+#[test]
+fn a_colmap_masks_folder_missing_a_photos_mask_is_named() {
+    let (dir, _) = capture(
+        SceneFormat::Colmap,
+        CaptureLayout::ObjectCentred,
+        Encoding::Binary,
+    );
+    let gone = dir.path().join("masks/frame_004.png.png");
+    std::fs::remove_file(&gone).unwrap();
+    let err = load_err(dir.path());
+    assert!(err.contains("mask of image"), "{err}");
+    assert_names(&err, "frame_004.png.png");
 }

@@ -2,6 +2,8 @@
 //! text model, with sparse points and their observations) or an instant-ngp / nerfstudio
 //! `transforms.json`, taken through a lens with OpenCV distortion, in a world frame of its own
 //! (rotated, scaled, shifted), so the readers' conventions and the framing are both exercised.
+//! Object-centred captures come with the objects' masks in `masks/` (COLMAP's naming,
+//! `NAME.png`; transforms.json's `mask_path`), as a capture prepared for a surface method has.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -90,30 +92,62 @@ fn capture_cameras(layout: CaptureLayout, opts: &SynthOptions) -> (AnalyticScene
     (scene, cameras)
 }
 
+/// Renders and writes `images/NAME` for each camera and, with `mask_name`, the foreground
+/// mask as `masks/MASK_NAME`.
 fn render_views(
     scene: &AnalyticScene,
     cameras: Vec<Camera>,
     dir: &Path,
     name: impl Fn(usize) -> String,
+    mask_name: Option<&dyn Fn(&str) -> String>,
 ) -> Result<Vec<SynthView>, DataError> {
     let img_dir = dir.join("images");
     std::fs::create_dir_all(&img_dir).map_err(|e| DataError::io(&img_dir, e))?;
+    let mask_dir = dir.join("masks");
+    if mask_name.is_some() {
+        std::fs::create_dir_all(&mask_dir).map_err(|e| DataError::io(&mask_dir, e))?;
+    }
     cameras
         .into_iter()
         .enumerate()
         .map(|(i, camera)| {
             let render = scene.render(&camera);
-            let path = img_dir.join(name(i));
+            let file = name(i);
+            let path = img_dir.join(&file);
             let rgb: Vec<u8> = render.rgb.iter().map(|&v| to_u8(v)).collect();
             write_png(&path, camera.width, camera.height, 3, &rgb)?;
+            if let Some(mask_name) = mask_name {
+                let m: Vec<u8> = render
+                    .mask
+                    .iter()
+                    .map(|&b| if b { 255 } else { 0 })
+                    .collect();
+                write_png(
+                    &mask_dir.join(mask_name(&file)),
+                    camera.width,
+                    camera.height,
+                    1,
+                    &m,
+                )?;
+            }
             Ok(SynthView::new(camera, Split::Train, path, render))
         })
         .collect()
 }
 
+/// COLMAP's mask name for a photo: `NAME.png`.
+fn colmap_mask_name(file: &str) -> String {
+    format!("{file}.png")
+}
+
+/// The transforms.json capture's mask name: the photo's own.
+fn same_name(file: &str) -> String {
+    file.to_string()
+}
+
 /// A COLMAP workspace: `images/frame_NNN.png` and `sparse/0/` in `encoding`, one OPENCV camera,
-/// image ids in an order other than their names', and sparse points on the surfaces with
-/// their observations.
+/// image ids in an order other than their names', sparse points on the surfaces with their
+/// observations, and for an object-centred capture `masks/frame_NNN.png.png`.
 pub fn write_colmap(
     dir: &Path,
     opts: &SynthOptions,
@@ -121,7 +155,9 @@ pub fn write_colmap(
     encoding: Encoding,
 ) -> Result<SynthScene, DataError> {
     let (scene, cameras) = capture_cameras(layout, opts);
-    let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:03}.png"))?;
+    let masks = (layout == CaptureLayout::ObjectCentred)
+        .then_some(&colmap_mask_name as &dyn Fn(&str) -> String);
+    let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:03}.png"), masks)?;
     let c = &views[0].camera;
     let Distortion::Polynomial { k, p } = SYNTH_LENS else {
         unreachable!("the synthetic lens is polynomial")
@@ -212,14 +248,17 @@ fn surface_points(v: &SynthView) -> Vec<([f64; 2], glam::DVec3)> {
 
 /// A nerfstudio-style `transforms.json`: scene-wide OPENCV intrinsics with `k1 k2 p1 p2`,
 /// camera-to-world matrices (OpenGL axes), `file_path`s relative to the file, every other one
-/// without its extension, and the surface points as `sparse_pc.ply` (`ply_file_path`).
+/// without its extension, the surface points as `sparse_pc.ply` (`ply_file_path`), and for an
+/// object-centred capture each frame's `mask_path`.
 pub fn write_transforms(
     dir: &Path,
     opts: &SynthOptions,
     layout: CaptureLayout,
 ) -> Result<SynthScene, DataError> {
     let (scene, cameras) = capture_cameras(layout, opts);
-    let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:05}.png"))?;
+    let with_masks = layout == CaptureLayout::ObjectCentred;
+    let masks = with_masks.then_some(&same_name as &dyn Fn(&str) -> String);
+    let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:05}.png"), masks)?;
     let c = &views[0].camera;
     let Distortion::Polynomial { k, p } = SYNTH_LENS else {
         unreachable!("the synthetic lens is polynomial")
@@ -234,7 +273,11 @@ pub fn write_transforms(
                 format!("./images/frame_{i:05}")
             };
             let m = &v.camera.c2w;
-            json!({ "file_path": file, "transform_matrix": [m[0], m[1], m[2], [0.0, 0.0, 0.0, 1.0]] })
+            let mut frame = json!({ "file_path": file, "transform_matrix": [m[0], m[1], m[2], [0.0, 0.0, 0.0, 1.0]] });
+            if with_masks {
+                frame["mask_path"] = format!("masks/frame_{i:05}.png").into();
+            }
+            frame
         })
         .collect();
     let doc = json!({
