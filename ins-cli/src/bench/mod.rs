@@ -29,7 +29,8 @@ use ins_core::train::{Phase, Stepper, Task};
 pub struct BenchArgs {
     /// Workloads: vgg, vgg-layers (per-convolution profile), siren, nerf-pretrain, nerf-stylize,
     /// nerf-grid, nerf-grid-stylize (the default stylization step: grid NeRF, guided NNFM),
-    /// hash-grid, hash-grid-reference, idr-pretrain (default: vgg, siren, nerf-pretrain,
+    /// hash-grid, hash-grid-object (its points inside a small object), hash-grid-reference,
+    /// idr-pretrain (default: vgg, siren, nerf-pretrain,
     /// nerf-stylize, nerf-grid).
     workloads: Vec<String>,
     #[command(flatten)]
@@ -52,7 +53,7 @@ pub struct Timing {
     pub rays: Option<f64>,
 }
 
-const KNOWN: &str = "vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, nerf-grid-stylize, hash-grid, hash-grid-reference, idr-pretrain";
+const KNOWN: &str = "vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, nerf-grid-stylize, hash-grid, hash-grid-object, hash-grid-reference, idr-pretrain";
 
 pub fn run(args: BenchArgs) -> Result<()> {
     let workloads = if args.workloads.is_empty() {
@@ -78,8 +79,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "nerf-stylize" => nerf_stylize::run(&device, args.steps, precision)?,
             "nerf-grid" => nerf_grid::run(&device, args.steps)?,
             "nerf-grid-stylize" => nerf_grid_stylize::run(&device, args.steps, precision)?,
-            "hash-grid" => hash_grid::run(&device, args.steps, true)?,
-            "hash-grid-reference" => hash_grid::run(&device, args.steps, false)?,
+            "hash-grid" => hash_grid::run(&device, args.steps, true, hash_grid::Points::Spread)?,
+            "hash-grid-object" => {
+                hash_grid::run(&device, args.steps, true, hash_grid::Points::Object)?
+            }
+            "hash-grid-reference" => {
+                hash_grid::run(&device, args.steps, false, hash_grid::Points::Spread)?
+            }
             "idr-pretrain" => idr_pretrain::run(&device, args.steps)?,
             other => bail!("unknown workload {other:?} (known: {KNOWN})"),
         };
