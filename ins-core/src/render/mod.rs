@@ -2,6 +2,7 @@
 //! compositing, and sphere tracing of signed distance fields. Cameras, rays and patches come
 //! from `ins-scene`, in its one camera convention.
 
+pub mod gather;
 pub mod occupancy;
 pub mod samplers;
 pub mod sphere_tracing;

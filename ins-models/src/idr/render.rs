@@ -3,6 +3,7 @@
 //! so colour gradients reach the SDF; shade with the normal ∇f(x(θ)) under every style.
 
 use burn::prelude::*;
+use ins_core::render::gather::select_parallel;
 use ins_core::render::sphere_tracing::{TraceOptions, Traced, sphere_trace};
 use ins_core::shape_buckets::{pad_rows, padded_size};
 use ins_scene::geometry::Vec3;
@@ -148,9 +149,7 @@ pub fn render_surface(
         index[i] = k as i64;
     }
     let index = Tensor::<1, Int>::from_data(TensorData::new(index, [r]), device);
-    let rgb = Tensor::cat(vec![colour, bg], 1)
-        .select(1, index)
-        .reshape([s * r, 3]);
+    let rgb = select_parallel(Tensor::cat(vec![colour, bg], 1), 1, index).reshape([s * r, 3]);
     SurfaceRender {
         rgb,
         traced,

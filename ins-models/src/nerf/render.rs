@@ -2,6 +2,7 @@
 //! variant, coarse-to-fine for the MLP), evaluate the field (under every style), composite.
 
 use burn::prelude::*;
+use ins_core::render::gather::select_parallel;
 use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite};
@@ -224,12 +225,18 @@ fn render_marched(
     );
     let s = ev.density.dims()[0];
     let index = Tensor::<1, Int>::from_data(TensorData::new(index, [r * width]), device);
-    let density = Tensor::cat(vec![ev.density, Tensor::zeros([s, 1], device)], 1)
-        .select(1, index.clone())
-        .reshape([s * r, width]);
-    let rgb = Tensor::cat(vec![ev.rgb, Tensor::zeros([s, 1, 3], device)], 1)
-        .select(1, index)
-        .reshape([s * r, width, 3]);
+    let density = select_parallel(
+        Tensor::cat(vec![ev.density, Tensor::zeros([s, 1], device)], 1),
+        1,
+        index.clone(),
+    )
+    .reshape([s * r, width]);
+    let rgb = select_parallel(
+        Tensor::cat(vec![ev.rgb, Tensor::zeros([s, 1, 3], device)], 1),
+        1,
+        index,
+    )
+    .reshape([s * r, width, 3]);
     let t = repeat_rows(tensor2(t_pad, r, width, device), s);
     let delta = repeat_rows(tensor2(delta_pad, r, width, device), s);
     Rendered {
