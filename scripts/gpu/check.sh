@@ -3,25 +3,9 @@
 # .gl carried (scripts/gpu/pack.sh makes them). Stages run in order of importance, each under its
 # own timeout and all under one deadline (DEADLINE seconds, default 560), so the call ends inside
 # the device tool's 10 minutes whatever hangs; everything goes to $OUT/log.txt.
-OUT=${OUT:-/tmp/gpu_out}; mkdir -p "$OUT"
 DEADLINE=${DEADLINE:-560}
-exec > >(tee -a "$OUT/log.txt") 2>&1
-t0=$(date +%s)
-stamp() { echo "[$(( $(date +%s) - t0 ))s] $*"; }
-stage() { # stage NAME TIMEOUT command...: skipped when the deadline leaves under 15 s
-  local name=$1 to=$2; shift 2
-  local left=$(( DEADLINE - ($(date +%s) - t0) ))
-  (( left < 15 )) && { stamp "SKIP $name (deadline)"; return; }
-  (( to > left )) && to=$left
-  stamp "BEGIN $name (timeout $to s): $*"
-  local s; s=$(date +%s.%N)
-  timeout -k 5 "$to" "$@"; local rc=$?
-  stamp "END $name rc=$rc wall=$(python3 -c "print(round($(date +%s.%N)-$s, 2))") s"
-}
-for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
-nvidia-smi -L
-python3 -c "import lzma,shutil; shutil.copyfileobj(lzma.open('.dev/ins-cli.xz'), open('/tmp/ins-cli','wb'))"
-chmod +x /tmp/ins-cli; BIN=/tmp/ins-cli
+source scripts/gpu/lib.sh
+unpack ins-cli; BIN=/tmp/ins-cli
 read -r bpk onnx size mtime < .dev/vgg.meta
 mkdir -p "$(dirname "$onnx")"
 python3 -c "import lzma,shutil; shutil.copyfileobj(lzma.open('.dev/vgg.bpk.xz'), open('$(dirname "$onnx")/$bpk','wb'))"

@@ -4,7 +4,9 @@
 # 200² (every 4th val view), a painting, PyTorch's benchmark program, and Vulkan's loader and
 # libglvnd as .deb files in .gl/ (NVIDIA's Vulkan driver needs libGLdispatch).
 # Run from the repository root after `cargo build --release -p ins-cli` and `ins-cli vgg fetch`.
-# PYTHON must have Pillow (for the 200² lego).
+# PYTHON must have Pillow (for the 200² lego). For profile.sh: SPIRV_BIN names a binary built
+# with `--features spirv` (packed as ins-cli-spirv.xz), and VGG=0 leaves the weights out (two
+# binaries and VGG do not fit the 64 MiB together).
 set -euo pipefail
 SHARED=${SHARED:-../shared}
 PYTHON=${PYTHON:-python3}
@@ -14,6 +16,13 @@ grep -qx '/.gl/' .git/info/exclude 2>/dev/null || echo /.gl/ >> .git/info/exclud
 mkdir -p .dev .gl
 strip -o /tmp/ins-cli.stripped target/release/ins-cli
 xz -9 -T2 -c /tmp/ins-cli.stripped > .dev/ins-cli.xz
+if [ -n "${SPIRV_BIN:-}" ]; then
+  strip -o /tmp/ins-cli-spirv.stripped "$SPIRV_BIN"
+  xz -9 -T2 -c /tmp/ins-cli-spirv.stripped > .dev/ins-cli-spirv.xz
+else
+  rm -f .dev/ins-cli-spirv.xz
+fi
+if [ "${VGG:-1}" != 0 ]; then
 # The converted weights are found by a key of the ONNX file's path, size and modification time:
 # the check recreates an empty file with the same three at the same path.
 onnx=$CACHE/vgg16/vgg16_imagenet_tf2onnx.onnx
@@ -21,6 +30,9 @@ bpk=$(ls "$CACHE"/vgg16/converted-*.bpk | head -1)
 xz -9 -T2 -c "$bpk" > .dev/vgg.bpk.xz
 cp "${bpk%.bpk}.json" .dev/
 echo "$(basename "$bpk") $onnx $(stat -c %s "$onnx") $(stat -c %y "$onnx" | sed 's/ /_/g')" > .dev/vgg.meta
+else
+  rm -f .dev/vgg.bpk.xz .dev/vgg.meta .dev/converted-*.json
+fi
 cp "$SHARED/data/styles/starry_night.jpg" "$SHARED/bench/torch_ref.py" .dev/
 "$PYTHON" - "$SHARED/data/nerf_synthetic/lego" .dev/lego200 <<'PY'
 import json, os, sys
