@@ -99,7 +99,7 @@ fn render_views(
     cameras: Vec<Camera>,
     dir: &Path,
     name: impl Fn(usize) -> String,
-    mask_name: Option<&dyn Fn(&str) -> String>,
+    mask_name: Option<fn(&str) -> String>,
 ) -> Result<Vec<SynthView>, DataError> {
     let img_dir = dir.join("images");
     std::fs::create_dir_all(&img_dir).map_err(|e| DataError::io(&img_dir, e))?;
@@ -135,16 +135,6 @@ fn render_views(
         .collect()
 }
 
-/// COLMAP's mask name for a photo: `NAME.png`.
-fn colmap_mask_name(file: &str) -> String {
-    format!("{file}.png")
-}
-
-/// The transforms.json capture's mask name: the photo's own.
-fn same_name(file: &str) -> String {
-    file.to_string()
-}
-
 /// A COLMAP workspace: `images/frame_NNN.png` and `sparse/0/` in `encoding`, one OPENCV camera,
 /// image ids in an order other than their names', sparse points on the surfaces with their
 /// observations, and for an object-centred capture `masks/frame_NNN.png.png`.
@@ -155,8 +145,9 @@ pub fn write_colmap(
     encoding: Encoding,
 ) -> Result<SynthScene, DataError> {
     let (scene, cameras) = capture_cameras(layout, opts);
+    // COLMAP's mask name for a photo: `NAME.png`.
     let masks = (layout == CaptureLayout::ObjectCentred)
-        .then_some(&colmap_mask_name as &dyn Fn(&str) -> String);
+        .then_some((|file: &str| format!("{file}.png")) as fn(&str) -> String);
     let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:03}.png"), masks)?;
     let c = &views[0].camera;
     let Distortion::Polynomial { k, p } = SYNTH_LENS else {
@@ -257,7 +248,7 @@ pub fn write_transforms(
 ) -> Result<SynthScene, DataError> {
     let (scene, cameras) = capture_cameras(layout, opts);
     let with_masks = layout == CaptureLayout::ObjectCentred;
-    let masks = with_masks.then_some(&same_name as &dyn Fn(&str) -> String);
+    let masks = with_masks.then_some(str::to_string as fn(&str) -> String);
     let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:05}.png"), masks)?;
     let c = &views[0].camera;
     let Distortion::Polynomial { k, p } = SYNTH_LENS else {
