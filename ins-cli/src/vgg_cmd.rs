@@ -22,9 +22,10 @@ pub struct VggArgs {
     /// Cache folder (default: $INS_CACHE_DIR, else ~/.cache/ins-rs).
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
-    /// Arithmetic of the VGG convolutions: f32, or bf16 (BF16 products with f32 sums on Intel
-    /// AMX or by AVX-512 BF16, f32 on CPUs with neither). Default: bf16 where the CPU has
-    /// either, else f32.
+    /// Arithmetic of the VGG convolutions: f32; bf16 (BF16 products with f32 sums on Intel AMX
+    /// or by AVX-512 BF16, on flex; f32 on CPUs with neither); or f16 (Burn's convolution in
+    /// half precision on a wgpu adapter with f16 shaders; f32 elsewhere). Default: bf16 where
+    /// the CPU has either, else f32.
     #[arg(long, value_name = "P")]
     pub precision: Option<Precision>,
 }
@@ -40,22 +41,29 @@ impl VggArgs {
     pub fn load(&self, device: &Device) -> anyhow::Result<Vgg> {
         let vgg = load_vgg(&self.source(), device)?;
         let precision = self.precision();
-        if !ins_conv::kernel_device(device) {
-            // The BF16 kernels run on flex only; elsewhere (wgpu, ndarray) Burn convolves in f32.
-            eprintln!("VGG convolutions in f32 (Burn's convolution: the BF16 kernels are flex's)");
-            return Ok(vgg.with_precision(precision));
-        }
-        match precision.effective() {
-            Precision::F32 if precision == Precision::Bf16 => eprintln!(
+        let runs = precision.effective_on(device);
+        match (precision, runs) {
+            (Precision::Bf16, Precision::F32) if ins_conv::kernel_device(device) => eprintln!(
                 "--precision bf16: this CPU (or {}) offers neither AMX-BF16 nor AVX-512 BF16; \
                  VGG runs in f32",
                 ins_conv::dpbf16::DISABLE_ENV
             ),
-            Precision::Bf16 => eprintln!(
+            (Precision::Bf16, Precision::F32) => eprintln!(
+                "VGG convolutions in f32 (Burn's convolution: the BF16 kernels are flex's; \
+                 --precision f16 for half precision on a GPU)"
+            ),
+            (Precision::F16, Precision::F32) => eprintln!(
+                "--precision f16: this device has no f16 arithmetic (f16 runs on a wgpu adapter \
+                 with f16 shaders); VGG runs in f32"
+            ),
+            (_, Precision::Bf16) => eprintln!(
                 "VGG convolutions in {} (--precision f32 for f32)",
                 ins_conv::Engine::bf16_or_f32().describe()
             ),
-            Precision::F32 => {}
+            (_, Precision::F16) => {
+                eprintln!("VGG convolutions in f16 on the GPU (--precision f32 for f32)")
+            }
+            (_, Precision::F32) => {}
         }
         Ok(vgg.with_precision(precision))
     }

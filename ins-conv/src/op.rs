@@ -376,6 +376,14 @@ pub fn kernel_device(device: &Device) -> bool {
     )
 }
 
+/// Whether `device` is a GPU (CubeCL's wgpu runtime) whose adapter computes in f16.
+pub fn half_device(device: &Device) -> bool {
+    matches!(
+        device.clone().inner().as_dispatch(),
+        DispatchDevice::Cube(_)
+    ) && device.supports_dtype(DType::F16)
+}
+
 /// `x [B, Ci, H, W]` convolved with `weight [Co, Ci, kh, kw]` (+ `bias [Co]`), through the op.
 /// Only for devices where [`kernel_device`] holds.
 pub fn conv2d(

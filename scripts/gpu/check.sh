@@ -27,6 +27,8 @@ metrics $R/lego_st 5; cp $R/lego_st/val/final.png "$OUT/lego_stylized.png" 2>/de
 stage bench_new 100 $BIN bench --backend wgpu --steps 3 nerf-grid nerf-grid-stylize idr-pretrain hash-grid
 stage torch 40 python3 .dev/torch_ref.py --device cuda --steps 5
 stage bench_ref 80 $BIN bench --backend wgpu --steps 3 siren vgg nerf-pretrain nerf-stylize
+# VGG in f16 (opt-in until a GPU shows it faster), against the f32 figure just above.
+stage bench_f16 40 $BIN bench --backend wgpu --steps 3 --precision f16 vgg nerf-grid-stylize
 # 5. The same runs again with every kernel cached: what a user's second run costs.
 stage lego_pretrain_warm 90 $BIN train nerf --scene .dev/lego200 --out $R/lego2 --quiet --backend wgpu
 metrics $R/lego2 3

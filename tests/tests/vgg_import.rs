@@ -191,3 +191,81 @@ fn rel_l2(a: &[f32], b: &[f32]) -> f32 {
     let n: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum();
     (d / n).sqrt() as f32
 }
+
+/// `--precision f16` on wgpu against f32 on the same adapter, the real network and photo: the
+/// style layers' features and the input gradient of a style loss. An adapter without f16
+/// shaders falls back to f32 and must give the very same features.
+#[test]
+fn f16_features_on_wgpu_stay_close_to_f32() {
+    use ins_conv::Precision;
+    let (features, gradients, half) = ins_tests::within(900, "VGG on wgpu in f16 and f32", || {
+        let device = ins_core::backend::BackendChoice::Wgpu.device().autodiff();
+        let half = Precision::F16.effective_on(&device) == Precision::F16;
+        let f32_vgg = real_vgg(&device);
+        let f16_vgg = f32_vgg.clone().with_precision(Precision::F16);
+        // A 64² crop keeps lavapipe's time small.
+        let x =
+            npy_tensor4(&fixture("vgg/real_input.npy"), &device).slice([0..1, 0..3, 0..64, 0..64]);
+        let run = |vgg: &Vgg| {
+            let x = x.clone().require_grad();
+            let f = vgg.features(x.clone());
+            // A style loss of the size stylization uses: Gram distances to a fixed target.
+            let loss = f
+                .style_layers()
+                .iter()
+                .map(|t| {
+                    let g = ins_core::loss::gram((*t).clone());
+                    (g.clone() - g.detach().mul_scalar(0.5))
+                        .powf_scalar(2.0)
+                        .mean()
+                })
+                .reduce(|a, b| a + b)
+                .unwrap();
+            let grad = x.grad(&loss.backward()).unwrap();
+            let layers: Vec<Vec<f32>> = f
+                .style_layers()
+                .iter()
+                .map(|t| values((*t).clone().inner()))
+                .collect();
+            (layers, values(grad.inner()))
+        };
+        let (fa, da) = run(&f32_vgg);
+        let (fb, db) = run(&f16_vgg);
+        (
+            fa.iter()
+                .zip(&fb)
+                .map(|(a, b)| (a.clone(), b.clone()))
+                .collect::<Vec<_>>(),
+            (da, db),
+            half,
+        )
+    });
+    if !half {
+        eprintln!("this adapter has no f16 shaders: f16 falls back to f32");
+        for (a, b) in &features {
+            assert_eq!(
+                a, b,
+                "without f16 shaders, f16 must fall back to the f32 network"
+            );
+        }
+        return;
+    }
+    for (name, (a, b)) in vgg_import::VggFeatures::NAMES.iter().zip(&features) {
+        let d = max_rel_diff(b, a, 1e-3);
+        eprintln!("{name}: features {d:.2e} of the layer's largest value");
+        assert!(
+            d > 0.0,
+            "{name}: f16 gave f32's exact values: not running in f16?"
+        );
+        assert!(
+            d < 2e-2,
+            "{name}: features differ by {d} of the layer's largest value"
+        );
+    }
+    let grad = rel_l2(&gradients.1, &gradients.0);
+    eprintln!("input gradient: {grad:.2e} (relative L2)");
+    assert!(
+        grad.is_finite() && grad < 5e-2,
+        "input gradients differ by {grad} (relative L2)"
+    );
+}

@@ -2,6 +2,7 @@
 
 use burn::module::Param;
 use burn::prelude::*;
+use burn::tensor::FloatDType;
 use burn::tensor::activation::relu;
 use burn::tensor::module::{conv2d, max_pool2d};
 use burn::tensor::ops::{ConvOptions, MaxPoolOptions};
@@ -96,23 +97,24 @@ impl Vgg16Features {
         self
     }
 
-    /// The BF16 engine when BF16 is asked for and can run on `device`; `None` means Burn's own
-    /// f32 convolution.
-    fn bf16_engine(&self, device: &Device) -> Option<Engine> {
-        if self.precision == Precision::Bf16 && ins_conv::kernel_device(device) {
-            Engine::bf16()
-        } else {
-            None
-        }
-    }
-
-    /// Runs a preprocessed `[B, 3, H, W]` batch to relu4_3.
+    /// Runs a preprocessed `[B, 3, H, W]` batch to relu4_3. The features come out in f32
+    /// whatever the convolutions computed in.
     pub fn forward(&self, x: Tensor<4>) -> VggFeatures {
         let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
-        let engine = self.bf16_engine(&x.device());
+        let precision = self.precision.effective_on(&x.device());
+        let engine = match precision {
+            Precision::Bf16 => Engine::bf16(),
+            _ => None,
+        };
+        let half = precision == Precision::F16;
+        let x = if half { x.cast(FloatDType::F16) } else { x };
         let conv = |i: usize, x: Tensor<4>| {
             let c = &self.convs[i];
-            let (w, b) = (c.weight.val(), Some(c.bias.val()));
+            let (mut w, mut b) = (c.weight.val(), c.bias.val());
+            if half {
+                // Cast on use: the module keeps one f32 copy for every device and precision.
+                (w, b) = (w.cast(FloatDType::F16), b.cast(FloatDType::F16));
+            }
             match engine {
                 // The ReLU is fused into the op (and its mask into the input gradient).
                 Some(engine) => {
@@ -124,11 +126,12 @@ impl Vgg16Features {
                         // VGG is frozen.
                         reuse_kernel: true,
                     };
-                    ins_conv::conv2d(x, w, b, params)
+                    ins_conv::conv2d(x, w, Some(b), params)
                 }
-                None => relu(conv2d(x, w, b, opts.clone())),
+                None => relu(conv2d(x, w, Some(b), opts.clone())),
             }
         };
+        let out = |x: Tensor<4>| if half { x.cast(FloatDType::F32) } else { x };
         let pool = |x: Tensor<4>| max_pool2d(x, MaxPoolOptions::new([2, 2]).with_stride([2, 2]));
         let x = conv(0, x);
         let relu1_2 = conv(1, x);
@@ -141,10 +144,10 @@ impl Vgg16Features {
         let x = conv(8, x);
         let relu4_3 = conv(9, x);
         VggFeatures {
-            relu1_2,
-            relu2_2,
-            relu3_3,
-            relu4_3,
+            relu1_2: out(relu1_2),
+            relu2_2: out(relu2_2),
+            relu3_3: out(relu3_3),
+            relu4_3: out(relu4_3),
         }
     }
 }

@@ -38,8 +38,9 @@ pub struct BenchArgs {
     /// Timed steps (after one warm-up step); the median is reported.
     #[arg(long, default_value_t = 5)]
     steps: usize,
-    /// Arithmetic of the VGG convolutions: f32, or bf16 (AMX or AVX-512 BF16; f32 where the
-    /// CPU has neither). Default: bf16 where the CPU can, as in training.
+    /// Arithmetic of the VGG convolutions: f32, bf16 (flex, with AMX or AVX-512 BF16; f32 where
+    /// the CPU has neither) or f16 (wgpu, where the adapter has f16 shaders). Default: bf16
+    /// where the CPU can, as in training.
     #[arg(long)]
     precision: Option<Precision>,
 }
@@ -105,7 +106,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             w.as_str(),
             "vgg" | "siren" | "nerf-stylize" | "nerf-grid-stylize"
         ) {
-            line["precision"] = precision.effective().to_string().into();
+            line["precision"] = precision.effective_on(&device).to_string().into();
         }
         if let Some(rays) = timing.rays {
             line["rays_per_s"] = ((rays / median * 1e3).round()).into();

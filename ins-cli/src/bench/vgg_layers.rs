@@ -7,10 +7,10 @@ use std::time::Instant;
 
 use anyhow::Result;
 use burn::prelude::*;
-use burn::tensor::Distribution;
 use burn::tensor::activation::relu;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::ConvOptions;
+use burn::tensor::{Distribution, FloatDType};
 use ins_conv::op::ConvParams;
 use ins_conv::{Engine, Precision};
 use vgg_import::onnx::VGG16_CHANNELS;
@@ -45,10 +45,16 @@ fn time(steps: usize, mut f: impl FnMut()) -> f64 {
 /// autodiff device): forward, input-gradient and weight-gradient milliseconds and GFLOP/s.
 pub fn run(device: &Device, backend: &str, steps: usize, precision: Precision) -> Result<()> {
     let opts = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
-    let precision = precision.effective();
-    // conv + ReLU as VGG runs it at this precision: Burn's conv2d in f32, the fused op in bf16.
+    let precision = precision.effective_on(device);
+    // conv + ReLU as VGG runs it at this precision: Burn's conv2d in f32 (or f16 on a GPU), the
+    // fused op in bf16.
     let conv_relu = |x: Tensor<4>, w: Tensor<4>, b: Tensor<1>| match precision {
         Precision::F32 => relu(conv2d(x, w, Some(b), opts.clone())),
+        Precision::F16 => {
+            let half = FloatDType::F16;
+            let y = conv2d(x.cast(half), w.cast(half), Some(b.cast(half)), opts.clone());
+            relu(y).cast(FloatDType::F32)
+        }
         Precision::Bf16 => {
             let params = ConvParams {
                 stride: [1, 1],
