@@ -55,8 +55,8 @@ pub enum DataCommand {
         /// blender, llff, dtu, colmap or transforms.
         #[arg(long)]
         format: SceneFormat,
-        /// Captures (colmap, transforms): `object` (around a tabletop) or `forward` (a
-        /// forward-facing grid).
+        /// Captures (colmap, transforms): `object` (around a tabletop in a room), `studio` (around
+        /// the tabletop's objects before a plain backdrop) or `forward` (a forward-facing grid).
         #[arg(long, default_value = "object")]
         layout: String,
         /// COLMAP: write the model as text instead of binary.
@@ -136,8 +136,9 @@ pub fn run(cmd: DataCommand) -> Result<()> {
             let opts = SynthOptions { size, views };
             let layout = match layout.as_str() {
                 "object" => synthetic::CaptureLayout::ObjectCentred,
+                "studio" => synthetic::CaptureLayout::Studio,
                 "forward" => synthetic::CaptureLayout::ForwardFacing,
-                other => bail!("--layout {other}: expected object or forward"),
+                other => bail!("--layout {other}: expected object, studio or forward"),
             };
             let encoding = if text {
                 Encoding::Text

@@ -63,6 +63,8 @@ pub struct AnalyticScene {
     pub objects: Vec<Object>,
     /// Local → world map.
     pub to_world: Similarity,
+    /// What a ray that meets nothing shows (black, or a studio's plain backdrop).
+    pub backdrop: Vec3,
 }
 
 /// The first surface a ray meets.
@@ -178,6 +180,17 @@ impl AnalyticScene {
         AnalyticScene {
             objects,
             to_world: Similarity::identity(),
+            backdrop: Vec3::ZERO,
+        }
+    }
+
+    /// The tabletop's objects before a plain light backdrop, as in a photo studio or on a white
+    /// table: nothing past the objects for structure from motion to find, and a background no
+    /// surface in front of the cameras explains.
+    pub fn studio() -> Self {
+        Self {
+            backdrop: Vec3::new(0.92, 0.92, 0.9),
+            ..Self::tabletop(false)
         }
     }
 
@@ -277,6 +290,7 @@ impl AnalyticScene {
         AnalyticScene {
             objects,
             to_world: Similarity::identity(),
+            backdrop: Vec3::ZERO,
         }
     }
 
@@ -320,7 +334,7 @@ impl AnalyticScene {
         let mut r = Rendering {
             width: camera.width,
             height: camera.height,
-            rgb: vec![0.0; n * 3],
+            rgb: self.backdrop.to_array().repeat(n),
             depth: vec![f32::INFINITY; n],
             object: vec![None; n],
             mask: vec![false; n],

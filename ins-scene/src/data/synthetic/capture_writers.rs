@@ -29,8 +29,18 @@ pub enum CaptureLayout {
     /// Around a tabletop in a room ([`AnalyticScene::room`]: floor and walls well past the
     /// cameras), at varying heights.
     ObjectCentred,
+    /// Around the tabletop's objects before a plain backdrop ([`AnalyticScene::studio`]):
+    /// sparse points on the objects alone.
+    Studio,
     /// A hand-held grid of cameras looking one way (the LLFF layout).
     ForwardFacing,
+}
+
+impl CaptureLayout {
+    /// Whether the cameras surround the objects (and the capture has their masks).
+    pub fn object_centred(self) -> bool {
+        self != CaptureLayout::ForwardFacing
+    }
 }
 
 /// The lens of the synthetic captures: a mild barrel with tangential terms, like a phone's.
@@ -47,8 +57,12 @@ fn capture_cameras(layout: CaptureLayout, opts: &SynthOptions) -> (AnalyticScene
     let (cx, cy) = (0.5 * w as f32 + 0.7, 0.5 * h as f32 - 0.4);
     let n = opts.views.max(1);
     let (mut scene, local): (AnalyticScene, Vec<[[f32; 4]; 3]>) = match layout {
-        CaptureLayout::ObjectCentred => (
-            AnalyticScene::room(),
+        CaptureLayout::ObjectCentred | CaptureLayout::Studio => (
+            if layout == CaptureLayout::Studio {
+                AnalyticScene::studio()
+            } else {
+                AnalyticScene::room()
+            },
             (0..n)
                 .map(|i| {
                     let az = i as f32 / n as f32 * std::f32::consts::TAU;
@@ -146,7 +160,8 @@ pub fn write_colmap(
 ) -> Result<SynthScene, DataError> {
     let (scene, cameras) = capture_cameras(layout, opts);
     // COLMAP's mask name for a photo: `NAME.png`.
-    let masks = (layout == CaptureLayout::ObjectCentred)
+    let masks = layout
+        .object_centred()
         .then_some((|file: &str| format!("{file}.png")) as fn(&str) -> String);
     let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:03}.png"), masks)?;
     let c = &views[0].camera;
@@ -247,7 +262,7 @@ pub fn write_transforms(
     layout: CaptureLayout,
 ) -> Result<SynthScene, DataError> {
     let (scene, cameras) = capture_cameras(layout, opts);
-    let with_masks = layout == CaptureLayout::ObjectCentred;
+    let with_masks = layout.object_centred();
     let masks = with_masks.then_some(str::to_string as fn(&str) -> String);
     let views = render_views(&scene, cameras, dir, |i| format!("frame_{i:05}.png"), masks)?;
     let c = &views[0].camera;
