@@ -63,6 +63,9 @@ pub fn base_run(
         base: None,
         data,
         model,
-        extra: grid,
+        extra: ins_models::nerf::state_io::NerfState {
+            grid,
+            ..Default::default()
+        },
     }
 }

@@ -75,8 +75,55 @@ impl GridGeometry {
         (sigma, out.slice([0..n, 1..w]))
     }
 
+    /// The same module with its raw density lowered by `by` everywhere (the output bias): a
+    /// fresh field that starts nearly transparent, `exp(−by)` times as dense.
+    pub fn with_density_offset(mut self, by: f32) -> Self {
+        if let Some(bias) = self.out.bias.take() {
+            let b = bias.val();
+            let device = b.device();
+            let n = b.dims()[0];
+            let mut shift = vec![0f32; n];
+            shift[0] = -by;
+            let shifted = (b + Tensor::<1>::from_floats(shift.as_slice(), &device)).detach();
+            self.out.bias = Some(burn::module::Param::from_tensor(shifted));
+        }
+        self
+    }
+
     /// Width of the features.
     pub fn d_features(&self) -> usize {
         self.out.weight.dims()[1] - 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    #[test]
+    fn a_density_offset_lowers_the_raw_density_alone_and_stays_trainable() {
+        let d = Device::flex().autodiff();
+        d.seed(3);
+        let config = GridGeometryConfig::new(HashGridConfig::new().with_log2_table(10));
+        let g = config.init([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], &d);
+        let x = Tensor::<2>::random([16, 3], Distribution::Uniform(-1.0, 1.0), &d);
+        let (raw, features) = g.forward(x.clone());
+        let g = g.with_density_offset(4.0);
+        let (raw2, features2) = g.forward(x);
+        let shift = (raw - raw2.clone())
+            .inner()
+            .into_data()
+            .to_vec::<f32>()
+            .unwrap();
+        assert!(shift.iter().all(|s| (s - 4.0).abs() < 1e-5), "{shift:?}");
+        let same = (features - features2).abs().max().into_scalar::<f32>();
+        assert_eq!(same, 0.0);
+        let grads = raw2.sum().backward();
+        let bias = g.out.bias.as_ref().unwrap().val();
+        assert!(
+            bias.grad(&grads).is_some(),
+            "the shifted bias lost its gradient"
+        );
     }
 }

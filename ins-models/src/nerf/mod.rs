@@ -6,12 +6,14 @@
 //! - [`model`]: the field (hash grid or NeRF MLP), coarse field, SIM and AM composed.
 //! - [`render`]: sampling along rays, evaluating the field under every style, compositing.
 //! - [`task`]: the losses of each phase, occupancy refresh, held-out evaluation.
+//! - [`background`]: the background colour an unbounded capture learns.
 //! - [`deferred`]: large stylization patches back-propagated chunk by chunk (ARF's deferred
 //!   back-propagation).
 //! - [`run`]: the NeRF variant of the shared run layer (pretrain, stylize, load).
 //! - [`eval`]: whole-view renders and their PSNR / SSIM.
 //! - [`mesh`]: marching cubes of the density, coloured by the radiance.
 
+pub mod background;
 pub mod config;
 pub mod deferred;
 pub mod early_stop;

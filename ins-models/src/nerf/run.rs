@@ -8,7 +8,7 @@ use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{LossWeights, PerceptualLoss, StyleLoss};
-use ins_core::modules::field::CimKind;
+use ins_core::modules::field::{CimKind, Geometry};
 use ins_core::modules::style_position::TEXTURE_LR_MULT;
 use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::train::{LrSchedule, Phase, RunFolder};
@@ -16,10 +16,12 @@ use ins_scene::data::{Scene, SceneFormat};
 use ins_scene::geometry::Vec3;
 use ins_scene::patches::PatchSpec;
 
+use super::background::learns_background;
 use super::config::NerfRunConfig;
 use super::eval::{evaluate_views, save_eval_picture};
 use super::model::NerfModel;
 use super::render::{Sampling, scene_aabb};
+use super::state_io::NerfState;
 use super::task::{EvalSchedule, NerfObjective, NerfTask, Sampler, Stylization};
 use crate::run::scene::{heldout_views, load_scene, spread};
 use crate::run::scene_frame::{check_scene_frame, write_scene_frame};
@@ -39,6 +41,13 @@ pub struct NerfScene {
     pub format: SceneFormat,
 }
 
+/// How much lower the fresh field of a capture that learns its background starts its raw
+/// density (`exp(−4)`: about 0.02 per unit, so a ray crosses the box nearly unhindered and the
+/// learned background is seen). At the usual start (about 1 per unit) every ray was opaque
+/// within a few units of its camera from the first step, the background never showed, and a
+/// plain backdrop stayed painted on that haze.
+const CAPTURE_DENSITY_OFFSET: f32 = 4.0;
+
 /// Share of the image's shorter side a stylization patch spans (see `PatchSpec::spanning`).
 pub const PATCH_SHARE: f32 = 0.6;
 
@@ -49,7 +58,7 @@ impl Variant for Nerf {
     type Model = NerfModel;
     type Objective = NerfObjective;
     type Task = NerfTask;
-    type Extra = Option<OccupancyGrid>;
+    type Extra = NerfState;
 
     fn kind(cfg: &NerfRunConfig) -> Result<RunKind> {
         cfg.kind()
@@ -117,7 +126,14 @@ impl Variant for Nerf {
     }
 
     fn new_model(cfg: &NerfRunConfig, data: &NerfScene, device: &Device) -> NerfModel {
-        NerfModel::new(&cfg.arch(), scene_aabb(&data.scene), device)
+        let mut model = NerfModel::new(&cfg.arch(), scene_aabb(&data.scene), device);
+        if learns_background(&data.scene) {
+            if let Geometry::Grid(g) = model.field.geometry {
+                model.field.geometry =
+                    Geometry::Grid(g.with_density_offset(CAPTURE_DENSITY_OFFSET));
+            }
+        }
+        model
     }
 
     fn add_stylizer(
@@ -138,12 +154,10 @@ impl Variant for Nerf {
         model.n_styles()
     }
 
-    fn decode_extra(task_state: Option<&[u8]>, at: &Path) -> Result<Option<OccupancyGrid>> {
+    fn decode_extra(task_state: Option<&[u8]>, at: &Path) -> Result<NerfState> {
         match task_state {
-            Some(bytes) => Ok(super::state_io::decode(bytes)
-                .with_context(|| at.display().to_string())?
-                .1),
-            None => Ok(None),
+            Some(bytes) => super::state_io::decode(bytes).with_context(|| at.display().to_string()),
+            None => Ok(NerfState::default()),
         }
     }
 
@@ -200,11 +214,12 @@ impl Variant for Nerf {
                 Ok(NerfTask::new(
                     scene,
                     sampler(cfg, false),
-                    base.extra,
+                    base.extra.grid,
                     Some(style),
                     eval,
                     device,
-                ))
+                )
+                .with_learned_background(base.extra.background))
             }
         }
     }
@@ -347,7 +362,7 @@ impl Run<Nerf> {
 
     /// The occupancy grid of the newest checkpoint (grid variant).
     pub fn grid(&self) -> Option<&OccupancyGrid> {
-        self.extra.as_ref()
+        self.extra.grid.as_ref()
     }
 
     /// The sampling for renders.
@@ -355,12 +370,17 @@ impl Run<Nerf> {
         render_sampling(self.scene_config(), self.grid())
     }
 
-    /// Background colour of the scene.
+    /// Background colour of the scene: white for alpha-composited photos, the learned one
+    /// for an object capture in a box, else black.
     pub fn background(&self) -> [f32; 3] {
-        if self.scene().white_background {
+        let fixed = if self.scene().white_background {
             [1.0; 3]
         } else {
             [0.0; 3]
+        };
+        match &self.extra.background {
+            Some(b) => b.colour(fixed),
+            None => fixed,
         }
     }
 }

@@ -1,16 +1,31 @@
-//! The NeRF task's state in a checkpoint (`task.bin`): the running samples-per-ray and the
-//! occupancy grid, in a small binary layout checked on reading (a damaged file is an error,
-//! never a huge allocation).
+//! The NeRF task's state in a checkpoint (`task.bin`): the running samples-per-ray, the
+//! occupancy grid and, since unbounded captures learn it, the background colour's running sums,
+//! in a small binary layout checked on reading (a damaged file is an error, never a huge
+//! allocation; a state written before the background was learned has none).
 
 use anyhow::{Result, bail, ensure};
 use ins_core::render::occupancy::OccupancyGrid;
+
+use super::background::LearnedBackground;
 
 const MAGIC: &[u8; 8] = b"INSNERF1";
 /// Largest grid accepted: 512³ cells.
 const MAX_RESOLUTION: u32 = 512;
 
+/// What a checkpoint keeps of the task.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct NerfState {
+    /// Running mean of fine samples per ray.
+    pub samples_per_ray: f32,
+    /// The occupancy grid (grid variant).
+    pub grid: Option<OccupancyGrid>,
+    /// The learned background (unbounded captures).
+    pub background: Option<LearnedBackground>,
+}
+
 /// Encodes the task state.
-pub fn encode(samples_per_ray: f32, grid: Option<&OccupancyGrid>) -> Vec<u8> {
+pub fn encode(state: &NerfState) -> Vec<u8> {
+    let (samples_per_ray, grid) = (state.samples_per_ray, state.grid.as_ref());
     let mut out = Vec::new();
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&samples_per_ray.to_le_bytes());
@@ -40,6 +55,11 @@ pub fn encode(samples_per_ray: f32, grid: Option<&OccupancyGrid>) -> Vec<u8> {
             out.extend(g.occupied.iter().map(|&o| o as u8));
         }
     }
+    if let Some(b) = &state.background {
+        for v in b.num.iter().chain([&b.den]) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
     out
 }
 
@@ -64,7 +84,7 @@ impl Reader<'_> {
 }
 
 /// Decodes what [`encode`] wrote.
-pub fn decode(bytes: &[u8]) -> Result<(f32, Option<OccupancyGrid>)> {
+pub fn decode(bytes: &[u8]) -> Result<NerfState> {
     let mut r = Reader { bytes, at: 0 };
     ensure!(r.take(8)? == MAGIC, "not a NeRF task state");
     let spr = r.f32()?;
@@ -97,7 +117,6 @@ pub fn decode(bytes: &[u8]) -> Result<(f32, Option<OccupancyGrid>)> {
                 .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
                 .collect();
             let occupied = r.take(n)?.iter().map(|&b| b != 0).collect();
-            ensure!(r.at == bytes.len(), "trailing bytes after the task state");
             Some(OccupancyGrid {
                 resolution,
                 min: [v[0], v[1], v[2]],
@@ -112,7 +131,23 @@ pub fn decode(bytes: &[u8]) -> Result<(f32, Option<OccupancyGrid>)> {
         }
         other => bail!("bad grid marker {other} in the task state"),
     };
-    Ok((spr, grid))
+    let background = if r.at < bytes.len() {
+        let num = [r.f32()?, r.f32()?, r.f32()?];
+        let den = r.f32()?;
+        ensure!(
+            num.iter().all(|v| v.is_finite()) && den.is_finite() && den >= 0.0,
+            "the background's sums are not finite"
+        );
+        Some(LearnedBackground { num, den })
+    } else {
+        None
+    };
+    ensure!(r.at == bytes.len(), "trailing bytes after the task state");
+    Ok(NerfState {
+        samples_per_ray: spr,
+        grid,
+        background,
+    })
 }
 
 #[cfg(test)]
@@ -125,17 +160,33 @@ mod tests {
         let mut g = OccupancyGrid::new(4, Vec3::splat(-1.0), Vec3::ONE, 0.1);
         g.density[3] = 2.5;
         g.occupied[5] = false;
-        let b = encode(12.5, Some(&g));
-        let (s, back) = decode(&b).unwrap();
-        assert_eq!(s, 12.5);
-        assert_eq!(back.unwrap(), g);
+        let state = |spr: f32, grid: Option<&OccupancyGrid>| NerfState {
+            samples_per_ray: spr,
+            grid: grid.cloned(),
+            background: None,
+        };
+        let b = encode(&state(12.5, Some(&g)));
+        let back = decode(&b).unwrap();
+        assert_eq!(back, state(12.5, Some(&g)));
         assert!(decode(&b[..b.len() - 1]).is_err());
         let mut huge = b.clone();
         huge[13..17].copy_from_slice(&100_000u32.to_le_bytes());
         assert!(decode(&huge).is_err());
-        assert_eq!(decode(&encode(3.0, None)).unwrap().1, None);
-        // A contracted grid keeps its contraction.
+        assert_eq!(decode(&encode(&state(3.0, None))).unwrap().grid, None);
+        // A contracted grid keeps its contraction, and a learned background its sums.
         let c = OccupancyGrid::contracted(4, ins_scene::geometry::Contraction { radius: 4.0 });
-        assert_eq!(decode(&encode(1.0, Some(&c))).unwrap().1.unwrap(), c);
+        let mut with_bg = state(1.0, Some(&c));
+        with_bg.background = Some(LearnedBackground {
+            num: [0.5, 1.0, 2.0],
+            den: 2.5,
+        });
+        let bytes = encode(&with_bg);
+        assert_eq!(decode(&bytes).unwrap(), with_bg);
+        // Cut inside the background's sums, or a NaN in them: errors.
+        assert!(decode(&bytes[..bytes.len() - 2]).is_err());
+        let mut nan = bytes.clone();
+        let at = nan.len() - 4;
+        nan[at..].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(decode(&nan).is_err());
     }
 }

@@ -19,10 +19,12 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+use super::background::{LearnedBackground, learns_background};
 use super::deferred::PatchRender;
 use super::eval::{evaluate_views, save_eval_picture};
 use super::model::NerfModel;
 use super::render::{RenderRays, Rendered, Sampling, render};
+use super::state_io::NerfState;
 
 /// What a phase of a NeRF run computes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -107,8 +109,11 @@ pub struct NerfTask {
     pub style: Option<Stylization>,
     /// Evaluation schedule.
     pub eval: EvalSchedule,
-    /// Background colour.
+    /// Background colour: white for alpha-composited photos, black for datasets and contracted
+    /// captures; an object capture in a box learns its own (see [`LearnedBackground`]).
     pub background: [f32; 3],
+    /// The learned background's running sums (object captures in a box).
+    learned_background: Option<LearnedBackground>,
     device: Device,
     last_samples: usize,
     last_rays: usize,
@@ -134,6 +139,7 @@ impl NerfTask {
         } else {
             [0.0; 3]
         };
+        let learned_background = learns_background(&scene).then(LearnedBackground::default);
         Self {
             scene,
             sampler,
@@ -142,10 +148,48 @@ impl NerfTask {
             style,
             eval,
             background,
+            learned_background,
             device: device.clone(),
             last_samples: 0,
             last_rays: 0,
         }
+    }
+
+    /// Starts from a pretrained run's learned background (stylization keeps it).
+    pub fn with_learned_background(mut self, learned: Option<LearnedBackground>) -> Self {
+        if let Some(b) = learned {
+            self.background = b.colour(self.background);
+            self.learned_background = Some(b);
+        }
+        self
+    }
+
+    /// Fits the learned background to a batch (see [`LearnedBackground`]): `pred` rendered over
+    /// `self.background` with `opacity`, against `target`, `[R, 3]` and `[R]`.
+    fn fit_background(&mut self, pred: &Tensor<2>, opacity: &Tensor<1>, target: &Tensor<2>) {
+        let Some(learned) = self.learned_background.as_mut() else {
+            return;
+        };
+        let r = target.dims()[0];
+        let through = opacity
+            .clone()
+            .detach()
+            .neg()
+            .add_scalar(1.0)
+            .reshape([r, 1]);
+        let bg = Tensor::<1>::from_floats(self.background, &self.device).reshape([1, 3]);
+        // target − field colour, the field's colour being the render less its background.
+        let residual = target.clone() - pred.clone().detach() + through.clone() * bg;
+        let num = (through.clone() * residual).sum_dim(0).reshape([3]);
+        let den = (through.clone() * through).sum().reshape([1]);
+        let Ok(sums) = Tensor::cat(vec![num, den], 0)
+            .into_data()
+            .try_to_vec::<f32>()
+        else {
+            return;
+        };
+        learned.update([sums[0], sums[1], sums[2]], sums[3]);
+        self.background = learned.colour(self.background);
     }
 
     /// The sampling for this step's render.
@@ -224,6 +268,9 @@ impl NerfTask {
             );
             (out.fine.rgb.clone(), target, out)
         };
+        if !random_background {
+            self.fit_background(&pred, &out.fine.opacity, &target);
+        }
         self.last_samples = out.samples;
         self.last_rays = r;
         let mut terms = LossTerms::default()
@@ -434,17 +481,22 @@ impl Task for NerfTask {
     }
 
     fn save_state(&self) -> Result<Option<Vec<u8>>> {
-        Ok(Some(super::state_io::encode(
-            self.samples_per_ray,
-            self.grid.as_ref(),
-        )))
+        Ok(Some(super::state_io::encode(&NerfState {
+            samples_per_ray: self.samples_per_ray,
+            grid: self.grid.clone(),
+            background: self.learned_background,
+        })))
     }
 
     fn load_state(&mut self, bytes: &[u8]) -> Result<()> {
-        let (samples_per_ray, grid) = super::state_io::decode(bytes)?;
-        self.samples_per_ray = samples_per_ray;
-        if grid.is_some() {
-            self.grid = grid;
+        let state = super::state_io::decode(bytes)?;
+        self.samples_per_ray = state.samples_per_ray;
+        if state.grid.is_some() {
+            self.grid = state.grid;
+        }
+        if let Some(b) = state.background {
+            self.background = b.colour(self.background);
+            self.learned_background = Some(b);
         }
         Ok(())
     }

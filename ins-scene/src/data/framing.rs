@@ -24,8 +24,8 @@ pub const CAMERA_RADIUS: f64 = 4.0;
 pub const UNIT_HALF_EXTENT: f64 = 1.5;
 /// Share of the sparse points the chosen box must hold.
 pub const POINT_COVERAGE: f64 = 0.95;
-/// The `aabb_scale` reported for an object-centred capture without sparse points or a stated
-/// one (its space is contracted past the cameras either way, see [`object_centred`]).
+/// The `aabb_scale` of an object-centred capture without sparse points or a stated one: a box
+/// of half side 6, the cameras (at radius 4) inside it (see [`object_centred`]).
 pub const DEFAULT_AABB_SCALE: u32 = 4;
 /// How far rays of a contracted scene run, in contraction radii: the contracted distance left
 /// beyond is 1/1000 of the radius.
@@ -195,12 +195,13 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 /// The frame of an object-centred capture: centred on the [`focus_point`] (the cameras' mean
 /// position when their axes do not meet), the cameras' mean up turned to +z, scaled so the
 /// cameras sit at [`CAMERA_RADIUS`] on average. Its extent: a stated `aabb_scale` is kept as
-/// instant-ngp's box; otherwise space beyond the cameras' radius is contracted
-/// ([`Contraction`]), as mip-NeRF 360 does. A real capture has background past its cameras
-/// (a floor, walls, a backdrop) even where its sparse points do not show it: white tables and
-/// black backdrops give SfM no features (DTU scan37's points all lie within the cameras, and a
-/// box there filled with fog: 11.6 dB held out). The `aabb_scale` the points would need (the
-/// smallest power of two whose box holds [`POINT_COVERAGE`] of them) is reported still.
+/// instant-ngp's box; sparse points that stay well inside the cameras' sphere (an object on a
+/// table, before a backdrop SfM finds nothing on) get the smallest power-of-two box holding
+/// [`POINT_COVERAGE`] of them, and the NeRF trainer learns the backdrop as one colour; points
+/// that reach the cameras or pass them (a room, a street) contract space beyond the cameras'
+/// radius ([`Contraction`]), as mip-NeRF 360 does; with no points to tell, the box of
+/// [`DEFAULT_AABB_SCALE`] holds the cameras and some room past them (on a room capture as good
+/// as the contraction, on a plain backdrop far better: see docs/measurements.md).
 pub fn object_centred(poses: &[Pose], points: &[DVec3], aabb_scale: Option<u32>) -> Framing {
     let n = poses.len().max(1) as f64;
     let mean = poses.iter().map(|p| column(p, 3)).sum::<DVec3>() / n;
@@ -239,6 +240,8 @@ pub fn object_centred(poses: &[Pose], points: &[DVec3], aabb_scale: Option<u32>)
         }
         k
     });
+    let past_cameras =
+        !points.is_empty() && f64::from(aabb_scale) * UNIT_HALF_EXTENT >= CAMERA_RADIUS;
     Framing {
         to_scene: Similarity {
             scale: s as f32,
@@ -252,7 +255,7 @@ pub fn object_centred(poses: &[Pose], points: &[DVec3], aabb_scale: Option<u32>)
         forward_facing: false,
         depth_ranges: vec![None; poses.len()],
         aabb_scale: Some(aabb_scale),
-        contraction: (!stated).then_some(Contraction {
+        contraction: (!stated && past_cameras).then_some(Contraction {
             radius: CAMERA_RADIUS as f32,
         }),
     }
@@ -346,11 +349,29 @@ mod tests {
     fn the_box_grows_to_hold_the_points() {
         let poses = ring(8, 4.0, Vec3::ZERO);
         let near: Vec<DVec3> = (0..100).map(|i| DVec3::splat(i as f64 * 0.01)).collect();
-        assert_eq!(object_centred(&poses, &near, None).aabb_scale, Some(1));
+        let object = object_centred(&poses, &near, None);
+        assert_eq!(object.aabb_scale, Some(1));
+        assert_eq!(
+            object.contraction, None,
+            "an object inside the cameras gets a box"
+        );
         let far: Vec<DVec3> = (0..100)
             .map(|i| DVec3::new(5.0 + i as f64 * 0.01, 0.0, 0.0))
             .collect();
-        assert_eq!(object_centred(&poses, &far, None).aabb_scale, Some(4));
-        assert_eq!(object_centred(&poses, &far, Some(2)).aabb_scale, Some(2));
+        let room = object_centred(&poses, &far, None);
+        assert_eq!(room.aabb_scale, Some(4));
+        assert!(
+            room.contraction.is_some(),
+            "points past the cameras are contracted"
+        );
+        let unknown = object_centred(&poses, &[], None);
+        assert_eq!(unknown.aabb_scale, Some(DEFAULT_AABB_SCALE));
+        assert_eq!(
+            unknown.contraction, None,
+            "without points, a box holding the cameras"
+        );
+        let stated = object_centred(&poses, &far, Some(2));
+        assert_eq!(stated.aabb_scale, Some(2));
+        assert_eq!(stated.contraction, None);
     }
 }
