@@ -36,6 +36,17 @@ const CAPTURE_NERF: &[&str] = &[
     "flex",
 ];
 
+/// Trains the capture network (`CAPTURE_NERF`) on `scene` into `run` and returns the mean line
+/// of `eval nerf` on its held-out views.
+fn train_and_evaluate(scene: &std::path::Path, run: &std::path::Path) -> serde_json::Value {
+    let mut args = vec!["train", "nerf", "--scene", s(scene), "--out", s(run)];
+    args.extend_from_slice(CAPTURE_NERF);
+    ok(cli(&args));
+    let o = ok(cli(&["eval", "nerf", "--run", s(run), "--backend", "flex"]));
+    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    serde_json::from_str(text.lines().last().expect("a mean line")).unwrap()
+}
+
 #[test]
 fn a_capture_with_background_checks_and_trains() {
     let dir = tempfile::tempdir().unwrap();
@@ -62,10 +73,7 @@ fn a_capture_with_background_checks_and_trains() {
         assert!(text.contains("lens     Polynomial"), "{text}");
     }
     let run = dir.path().join("run");
-    let scene = dir.path().join("colmap");
-    let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
-    args.extend_from_slice(CAPTURE_NERF);
-    ok(cli(&args));
+    let mean = train_and_evaluate(&dir.path().join("colmap"), &run);
     // The run says how it framed the capture.
     let frame: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(run.join("scene.json")).unwrap()).unwrap();
@@ -74,19 +82,8 @@ fn a_capture_with_background_checks_and_trains() {
         frame["to_scene"]["scale"].as_f64().unwrap() > 0.0,
         "{frame}"
     );
-    let o = ok(cli(&[
-        "eval",
-        "nerf",
-        "--run",
-        s(&run),
-        "--backend",
-        "flex",
-    ]));
-    let text = String::from_utf8_lossy(&o.stdout).to_string();
-    let mean: serde_json::Value =
-        serde_json::from_str(text.lines().last().expect("a mean line")).unwrap();
     let psnr = mean["psnr"].as_f64().expect("psnr in the mean line");
-    assert!(psnr > CAPTURE_PSNR_BAR, "held-out PSNR {psnr} dB: {text}");
+    assert!(psnr > CAPTURE_PSNR_BAR, "held-out PSNR {psnr} dB: {mean}");
     // A capture that now frames otherwise than when the run trained (here: the record says
     // another contraction) is refused, not rendered as noise.
     let mut frame = frame;
@@ -126,27 +123,14 @@ fn a_capture_before_a_plain_backdrop_learns_it_as_the_background() {
     let text = String::from_utf8_lossy(&o.stdout).to_string();
     assert!(text.contains("object-centred: box of half side"), "{text}");
     let run = dir.path().join("run");
-    let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
-    args.extend_from_slice(CAPTURE_NERF);
-    ok(cli(&args));
-    let o = ok(cli(&[
-        "eval",
-        "nerf",
-        "--run",
-        s(&run),
-        "--backend",
-        "flex",
-    ]));
-    let text = String::from_utf8_lossy(&o.stdout).to_string();
-    let mean: serde_json::Value =
-        serde_json::from_str(text.lines().last().expect("a mean line")).unwrap();
+    let mean = train_and_evaluate(&scene, &run);
     let (psnr, ssim) = (
         mean["psnr"].as_f64().unwrap(),
         mean["ssim"].as_f64().unwrap(),
     );
     assert!(
         psnr > 21.0 && ssim > 0.88,
-        "held-out PSNR {psnr} dB, SSIM {ssim}: {text}"
+        "held-out PSNR {psnr} dB, SSIM {ssim}: {mean}"
     );
     let loaded = ins_models::nerf::NerfRun::load(&run, &burn::prelude::Device::flex()).unwrap();
     let backdrop = ins_scene::data::synthetic::AnalyticScene::studio().backdrop;

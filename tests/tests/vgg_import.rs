@@ -125,28 +125,7 @@ fn bf16_features_stay_close_to_f32_on_the_real_network() {
     let f32_vgg = real_vgg(&device);
     let bf16_vgg = f32_vgg.clone().with_precision(Precision::Bf16);
     let x = npy_tensor4(&fixture("vgg/real_input.npy"), &device);
-    let run = |vgg: &Vgg| {
-        let x = x.clone().require_grad();
-        let f = vgg.features(x.clone());
-        let grams: Vec<Tensor<3>> = f
-            .style_layers()
-            .iter()
-            .map(|t| ins_core::loss::gram((*t).clone()))
-            .collect();
-        let loss = grams
-            .iter()
-            .map(|g| g.clone().powf_scalar(2.0).sum())
-            .reduce(|a, b| a + b)
-            .unwrap();
-        let grad = x.grad(&loss.backward()).unwrap();
-        let layers: Vec<Vec<f32>> = f
-            .style_layers()
-            .iter()
-            .map(|t| values((*t).clone().inner()))
-            .collect();
-        let grams: Vec<Vec<f32>> = grams.into_iter().map(|g| values(g.inner())).collect();
-        (layers, grams, values(grad.inner()))
-    };
+    let run = |vgg: &Vgg| layers_grams_and_gradient(vgg, &x, |g| g.powf_scalar(2.0).sum());
     let (fa, ga, da) = run(&f32_vgg);
     let (fb, gb, db) = run(&bf16_vgg);
     if Precision::Bf16.effective() == Precision::F32 {
@@ -186,6 +165,35 @@ fn bf16_features_stay_close_to_f32_on_the_real_network() {
     );
 }
 
+/// The style layers of `x` through `vgg`, their Gram matrices, and the input gradient of the
+/// sum over layers of `loss(Gram)`.
+fn layers_grams_and_gradient(
+    vgg: &Vgg,
+    x: &Tensor<4>,
+    loss: impl Fn(Tensor<3>) -> Tensor<1>,
+) -> (Vec<Vec<f32>>, Vec<Vec<f32>>, Vec<f32>) {
+    let x = x.clone().require_grad();
+    let f = vgg.features(x.clone());
+    let grams: Vec<Tensor<3>> = f
+        .style_layers()
+        .iter()
+        .map(|t| ins_core::loss::gram((*t).clone()))
+        .collect();
+    let total = grams
+        .iter()
+        .map(|g| loss(g.clone()))
+        .reduce(|a, b| a + b)
+        .unwrap();
+    let grad = x.grad(&total.backward()).unwrap();
+    let layers: Vec<Vec<f32>> = f
+        .style_layers()
+        .iter()
+        .map(|t| values((*t).clone().inner()))
+        .collect();
+    let grams: Vec<Vec<f32>> = grams.into_iter().map(|g| values(g.inner())).collect();
+    (layers, grams, values(grad.inner()))
+}
+
 fn rel_l2(a: &[f32], b: &[f32]) -> f32 {
     let d: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
     let n: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum();
@@ -206,28 +214,14 @@ fn f16_features_on_wgpu_stay_close_to_f32() {
         // A 64² crop keeps lavapipe's time small.
         let x =
             npy_tensor4(&fixture("vgg/real_input.npy"), &device).slice([0..1, 0..3, 0..64, 0..64]);
+        // A style loss of the size stylization uses: Gram distances to a fixed target.
         let run = |vgg: &Vgg| {
-            let x = x.clone().require_grad();
-            let f = vgg.features(x.clone());
-            // A style loss of the size stylization uses: Gram distances to a fixed target.
-            let loss = f
-                .style_layers()
-                .iter()
-                .map(|t| {
-                    let g = ins_core::loss::gram((*t).clone());
-                    (g.clone() - g.detach().mul_scalar(0.5))
-                        .powf_scalar(2.0)
-                        .mean()
-                })
-                .reduce(|a, b| a + b)
-                .unwrap();
-            let grad = x.grad(&loss.backward()).unwrap();
-            let layers: Vec<Vec<f32>> = f
-                .style_layers()
-                .iter()
-                .map(|t| values((*t).clone().inner()))
-                .collect();
-            (layers, values(grad.inner()))
+            let (layers, _, grad) = layers_grams_and_gradient(vgg, &x, |g| {
+                (g.clone() - g.detach().mul_scalar(0.5))
+                    .powf_scalar(2.0)
+                    .mean()
+            });
+            (layers, grad)
         };
         let (fa, da) = run(&f32_vgg);
         let (fb, db) = run(&f16_vgg);

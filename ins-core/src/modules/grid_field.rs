@@ -114,7 +114,7 @@ mod tests {
         let shift = (raw - raw2.clone())
             .inner()
             .into_data()
-            .to_vec::<f32>()
+            .try_to_vec::<f32>()
             .unwrap();
         assert!(shift.iter().all(|s| (s - 4.0).abs() < 1e-5), "{shift:?}");
         let same = (features - features2).abs().max().into_scalar::<f32>();
