@@ -157,11 +157,16 @@ impl NerfTask {
 
     /// Starts from a pretrained run's learned background (stylization keeps it).
     pub fn with_learned_background(mut self, learned: Option<LearnedBackground>) -> Self {
+        self.adopt_background(learned);
+        self
+    }
+
+    /// Takes over a learned background's sums and the colour they give.
+    fn adopt_background(&mut self, learned: Option<LearnedBackground>) {
         if let Some(b) = learned {
             self.background = b.colour(self.background);
             self.learned_background = Some(b);
         }
-        self
     }
 
     /// Fits the learned background to a batch (see [`LearnedBackground`]): `pred` rendered over
@@ -494,10 +499,7 @@ impl Task for NerfTask {
         if state.grid.is_some() {
             self.grid = state.grid;
         }
-        if let Some(b) = state.background {
-            self.background = b.colour(self.background);
-            self.learned_background = Some(b);
-        }
+        self.adopt_background(state.background);
         Ok(())
     }
 }
