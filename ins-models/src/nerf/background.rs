@@ -25,6 +25,16 @@ pub fn learns_background(scene: &Scene) -> bool {
         && !scene.white_background
 }
 
+/// The background a scene has without learning one: white for photos composited on white
+/// (NeRF-synthetic), black otherwise; a learned background starts from it.
+pub fn fixed_background(scene: &Scene) -> [f32; 3] {
+    if scene.white_background {
+        [1.0; 3]
+    } else {
+        [0.0; 3]
+    }
+}
+
 /// Running sums of the closed-form fit, decayed per step.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LearnedBackground {

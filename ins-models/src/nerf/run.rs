@@ -16,7 +16,7 @@ use ins_scene::data::{Scene, SceneFormat};
 use ins_scene::geometry::Vec3;
 use ins_scene::patches::PatchSpec;
 
-use super::background::learns_background;
+use super::background::{fixed_background, learns_background};
 use super::config::NerfRunConfig;
 use super::eval::{evaluate_views, save_eval_picture};
 use super::model::NerfModel;
@@ -373,11 +373,7 @@ impl Run<Nerf> {
     /// Background colour of the scene: white for alpha-composited photos, the learned one
     /// for an object capture in a box, else black.
     pub fn background(&self) -> [f32; 3] {
-        let fixed = if self.scene().white_background {
-            [1.0; 3]
-        } else {
-            [0.0; 3]
-        };
+        let fixed = fixed_background(self.scene());
         match &self.extra.background {
             Some(b) => b.colour(fixed),
             None => fixed,

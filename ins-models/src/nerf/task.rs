@@ -19,7 +19,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::background::{LearnedBackground, learns_background};
+use super::background::{LearnedBackground, fixed_background, learns_background};
 use super::deferred::PatchRender;
 use super::eval::{evaluate_views, save_eval_picture};
 use super::model::NerfModel;
@@ -134,11 +134,7 @@ impl NerfTask {
         eval: EvalSchedule,
         device: &Device,
     ) -> Self {
-        let background = if scene.white_background {
-            [1.0; 3]
-        } else {
-            [0.0; 3]
-        };
+        let background = fixed_background(&scene);
         let learned_background = learns_background(&scene).then(LearnedBackground::default);
         Self {
             scene,
