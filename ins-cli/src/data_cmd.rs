@@ -223,6 +223,9 @@ fn check(
         };
         println!("depth    near {:.3}, far {:.3} ({range})", s.near, s.far);
         println!("frame    {}", s.frame);
+        if let Some(edges) = &s.edges {
+            println!("edges    {edges}");
+        }
         if let Some(lens) = &s.lens {
             println!("lens     {lens}");
         }

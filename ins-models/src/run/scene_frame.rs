@@ -18,6 +18,7 @@ pub fn write_scene_frame(scene: &Scene, path: &Path) -> Result<()> {
         "to_scene": scene.to_scene,
         "forward_facing": scene.forward_facing,
         "contraction": scene.contraction,
+        "bounds": scene.bounds,
     });
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -43,6 +44,7 @@ pub fn check_scene_frame(scene: &Scene, path: &Path) -> Result<()> {
         "to_scene": scene.to_scene,
         "forward_facing": scene.forward_facing,
         "contraction": scene.contraction,
+        "bounds": scene.bounds,
     });
     let close = |a: &serde_json::Value, b: &serde_json::Value| -> bool {
         match (a, b) {
@@ -63,7 +65,11 @@ pub fn check_scene_frame(scene: &Scene, path: &Path) -> Result<()> {
             x => out.push(x.clone()),
         }
     }
-    for key in ["to_scene", "forward_facing", "contraction"] {
+    for key in ["to_scene", "forward_facing", "contraction", "bounds"] {
+        if recorded.get(key).is_none() {
+            // Written before the key was recorded (the bounds were added later).
+            continue;
+        }
         let (mut a, mut b) = (Vec::new(), Vec::new());
         leaves(&recorded[key], &mut a);
         leaves(&now[key], &mut b);

@@ -51,6 +51,9 @@ pub struct Summary {
     pub to_scene_scale: f32,
     /// How the scene is framed and rendered (NDC, a box, the unit sphere).
     pub frame: String,
+    /// What the photos' edges show: a plain backdrop (a capture without points is then framed
+    /// in the box its photos share) or not.
+    pub edges: Option<String>,
     /// The first view's lens distortion, when it has one.
     pub lens: Option<String>,
 }
@@ -166,6 +169,18 @@ pub fn summarize(scene: &Scene) -> Summary {
         camera_distance: min_max(&dists),
         to_scene_scale: scene.to_scene.scale,
         frame: describe_frame(scene),
+        edges: super::backdrop::edge_colour(&scene.views).map(|e| {
+            let [r, g, b] = e.colour;
+            let what = if e.is_plain() {
+                "a plain backdrop"
+            } else {
+                "not a plain backdrop"
+            };
+            format!(
+                "{what}: {:.0} % of the photos' edges near ({r:.2}, {g:.2}, {b:.2})",
+                100.0 * e.share
+            )
+        }),
         lens: first
             .filter(|c| !c.distortion.is_none())
             .map(|c| format!("{:?}", c.distortion)),

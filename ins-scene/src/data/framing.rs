@@ -233,12 +233,7 @@ pub fn object_centred(poses: &[Pose], points: &[DVec3], aabb_scale: Option<u32>)
             .map(|q| (s * (r * *q) + shift).abs().max_element())
             .collect();
         extent.sort_by(f64::total_cmp);
-        let need = percentile(&extent, POINT_COVERAGE) / UNIT_HALF_EXTENT;
-        let mut k = 1u32;
-        while (k as f64) < need && k < 64 {
-            k *= 2;
-        }
-        k
+        aabb_scale_holding(percentile(&extent, POINT_COVERAGE))
     });
     let past_cameras =
         !points.is_empty() && f64::from(aabb_scale) * UNIT_HALF_EXTENT >= CAMERA_RADIUS;
@@ -259,6 +254,46 @@ pub fn object_centred(poses: &[Pose], points: &[DVec3], aabb_scale: Option<u32>)
             radius: CAMERA_RADIUS as f32,
         }),
     }
+}
+
+/// The smallest power-of-two `aabb_scale` (up to 64) whose box has half side `half` or more.
+pub fn aabb_scale_holding(half: f64) -> u32 {
+    let need = half / UNIT_HALF_EXTENT;
+    let mut k = 1u32;
+    while (k as f64) < need && k < 64 {
+        k *= 2;
+    }
+    k
+}
+
+/// Share of the views a point must be in frame of to count as kept in view: most, not all, so
+/// that a few close-ups do not cut the subject.
+pub const SHARED_VIEW_SHARE: f32 = 0.9;
+/// Cells per side of the grid [`shared_view_half_extent`] searches.
+pub const SHARED_VIEW_RESOLUTION: usize = 64;
+
+/// Half side of the smallest origin-centred box holding every point that
+/// [`SHARED_VIEW_SHARE`] of the views keep in frame, searched on a grid over the box of half
+/// side `reach`; `None` when no point is (cameras looking outwards, a walk-through). A capture
+/// that shows its whole subject in each photo holds it there: for lego's hemisphere of 40°
+/// views at 4 units, a region of half side about 1.2 (the object's own box is 1.5).
+pub fn shared_view_half_extent(views: &[View], reach: f32) -> Option<f32> {
+    use rayon::prelude::*;
+    let n = SHARED_VIEW_RESOLUTION;
+    let cell = 2.0 * reach / n as f32;
+    let need = ((views.len() as f32 * SHARED_VIEW_SHARE).ceil() as usize).max(1);
+    (0..n * n * n)
+        .into_par_iter()
+        .filter_map(|i| {
+            let idx = Vec3::new((i % n) as f32, ((i / n) % n) as f32, (i / (n * n)) as f32);
+            let p = Vec3::splat(-reach) + (idx + 0.5) * cell;
+            let seen = views
+                .iter()
+                .filter(|v| v.camera.project(p).is_some_and(|q| v.camera.in_frame(q)))
+                .count();
+            (seen >= need).then(|| p.abs().max_element() + 0.5 * cell)
+        })
+        .reduce_with(f32::max)
 }
 
 /// The box of an object-centred framing: half side `1.5 · aabb_scale` around the origin.
@@ -343,6 +378,47 @@ mod tests {
             .collect();
         assert!(is_forward_facing(&poses));
         assert!(focus_point(&poses).is_none() || is_forward_facing(&poses));
+    }
+
+    /// Views of 32×24 pixels with a 40° horizontal field of view from `eyes`, looking at
+    /// `target(eye)`.
+    fn views(eyes: &[Vec3], target: impl Fn(Vec3) -> Vec3) -> Vec<View> {
+        let focal = 16.0 / (20f32).to_radians().tan();
+        eyes.iter()
+            .map(|&eye| View {
+                camera: crate::camera::Camera::look_at(32, 24, focal, eye, target(eye), Vec3::Z),
+                image: crate::data::images::Image::from_f32(32, 24, &[0.5; 32 * 24 * 3]),
+                mask: None,
+                path: "v.png".into(),
+                mask_path: None,
+                depth_range: None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_photos_share_the_region_around_what_they_look_at() {
+        let eyes: Vec<Vec3> = ring(16, 4.0, Vec3::ZERO)
+            .iter()
+            .map(|p| Vec3::new(p[0][3] as f32, p[1][3] as f32, p[2][3] as f32))
+            .collect();
+        let inward = shared_view_half_extent(&views(&eyes, |_| Vec3::ZERO), 6.0).unwrap();
+        // 40° across, the cameras 4.5 away: 1.6 either side of the centre, less towards them.
+        assert!((0.8..1.8).contains(&inward), "{inward}");
+        // Looking outwards (a walk around a room's walls), no point is in most photos.
+        assert_eq!(
+            shared_view_half_extent(&views(&eyes, |e| 2.0 * e), 6.0),
+            None
+        );
+    }
+
+    #[test]
+    fn boxes_come_in_powers_of_two() {
+        let k: Vec<u32> = [0.1, 1.5, 1.51, 3.0, 6.0, 6.1, 1e6]
+            .into_iter()
+            .map(aabb_scale_holding)
+            .collect();
+        assert_eq!(k, [1, 1, 2, 2, 4, 8, 64]);
     }
 
     #[test]

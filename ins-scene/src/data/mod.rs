@@ -7,6 +7,7 @@
 //! writes small analytic scenes in every format, and [`check`] runs geometric sanity checks on
 //! a loaded scene.
 
+pub mod backdrop;
 pub mod blender;
 pub mod capture;
 pub mod check;
