@@ -271,5 +271,53 @@ pub fn eval(a: EvalNerf) -> Result<()> {
             "PSNR/SSIM of a stylized run compare the stylized render with the photos".into();
     }
     println!("{mean}");
+    if !stylized && ins_models::nerf::view_audit::audits_views(scene) {
+        note_misposed_views(scene, &evals);
+    }
     Ok(())
+}
+
+/// Names the held-out photos of a capture that fit far below the others, as the training
+/// audit does for training photos: a photo posed wrongly by structure from motion scores the
+/// poses, not the field. The mean above keeps them; the note gives the mean without them.
+fn note_misposed_views(scene: &ins_scene::data::Scene, evals: &[ins_models::nerf::eval::ViewEval]) {
+    use ins_models::nerf::view_audit::{ViewFit, median_psnr, outliers};
+    let fits: Vec<ViewFit> = evals
+        .iter()
+        .map(|e| ViewFit {
+            view: e.view,
+            psnr: e.psnr,
+        })
+        .collect();
+    let out = outliers(&fits);
+    if out.is_empty() {
+        return;
+    }
+    let names: Vec<String> = out
+        .iter()
+        .map(|f| {
+            let path = &scene.views[f.view].path;
+            let name = path.file_name().unwrap_or(path.as_os_str());
+            format!(
+                "view {} ({}, {:.1} dB)",
+                f.view,
+                name.to_string_lossy(),
+                f.psnr
+            )
+        })
+        .collect();
+    let rest: Vec<f64> = fits
+        .iter()
+        .filter(|f| !out.iter().any(|o| o.view == f.view))
+        .map(|f| f.psnr)
+        .collect();
+    eprintln!(
+        "note: {} fit{} far below the other held-out photos (median {:.1} dB): likely posed \
+         wrongly; the mean without {}: {:.2} dB",
+        names.join(", "),
+        if out.len() == 1 { "s" } else { "" },
+        median_psnr(&fits),
+        if out.len() == 1 { "it" } else { "them" },
+        rest.iter().sum::<f64>() / rest.len().max(1) as f64
+    );
 }

@@ -208,6 +208,101 @@ fn a_capture_without_points_before_a_backdrop_gets_the_box_its_photos_share() {
     assert_clean_failure(&o, "framed differently");
 }
 
+/// Photos whose poses are wrong (structure from motion placed 6 of the phone-like lego
+/// capture's 44 across the object, turned half a turn; a phone's tracking drifts) are found by
+/// the audit after 30 % of pretraining, named, and left out, and no other photo is. Here four
+/// training photos of the studio capture are turned 35° about the vertical, in place. Measured
+/// with `CAPTURE_NERF` (this project's 2-core AMD EPYC, 2026-11-27): the four fit at 12.5–14.6
+/// dB against a median of 22.0 and are the four left out; held-out PSNR 22.18 / 21.69 dB (seeds
+/// 0 / 1) against 20.91 / 20.92 keeping them. (The same turn in the room capture goes
+/// unnoticed: there the four fit at 19.0–21.9 dB, within the others' 17.6–22.3.)
+#[test]
+fn misposed_photos_are_found_and_left_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("capture");
+    ok(cli(&[
+        "data",
+        "synth",
+        "--format",
+        "transforms",
+        "--layout",
+        "studio",
+        "--out",
+        s(&scene),
+        "--size",
+        "64",
+        "--views",
+        "40",
+    ]));
+    let json = scene.join("transforms.json");
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let frames = doc["frames"].as_array_mut().unwrap();
+    let pose = |f: &serde_json::Value| -> [[f64; 4]; 3] {
+        std::array::from_fn(|r| {
+            std::array::from_fn(|c| f["transform_matrix"][r][c].as_f64().unwrap())
+        })
+    };
+    let up: [f64; 3] = {
+        let u: [f64; 3] = std::array::from_fn(|r| frames.iter().map(|f| pose(f)[r][1]).sum());
+        let len = u.iter().map(|x| x * x).sum::<f64>().sqrt();
+        u.map(|x| x / len)
+    };
+    // Rodrigues: the rotation by `a` about the unit axis `up`.
+    let a = 35f64.to_radians();
+    let cross = [
+        [0.0, -up[2], up[1]],
+        [up[2], 0.0, -up[0]],
+        [-up[1], up[0], 0.0],
+    ];
+    let turn = |r: usize, c: usize| {
+        let id = if r == c { 1.0 } else { 0.0 };
+        a.cos() * id + a.sin() * cross[r][c] + (1.0 - a.cos()) * up[r] * up[c]
+    };
+    // Training photos (every 8th, from the first, is held out).
+    let names: Vec<String> = [3, 12, 21, 30]
+        .map(|i| format!("frame_{i:05}.png"))
+        .to_vec();
+    let mut turned = 0;
+    for f in frames.iter_mut() {
+        let path = f["file_path"].as_str().unwrap().to_string();
+        if !names
+            .iter()
+            .any(|n| n.starts_with(path.rsplit('/').next().unwrap()))
+        {
+            continue;
+        }
+        let p = pose(f);
+        let mut m = [[0.0f64; 4]; 4];
+        m[3][3] = 1.0;
+        for r in 0..3 {
+            for c in 0..3 {
+                m[r][c] = (0..3).map(|k| turn(r, k) * p[k][c]).sum();
+            }
+            m[r][3] = p[r][3];
+        }
+        f["transform_matrix"] = serde_json::json!(m);
+        turned += 1;
+    }
+    assert_eq!(turned, names.len());
+    std::fs::write(&json, doc.to_string()).unwrap();
+
+    let run = dir.path().join("run");
+    let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
+    args.extend_from_slice(CAPTURE_NERF);
+    let err = stderr(&ok(cli(&args)));
+    let line = err
+        .lines()
+        .find(|l| l.contains("their poses are likely wrong"))
+        .unwrap_or_else(|| panic!("no photo was left out: {err}"));
+    assert!(line.starts_with("4 of 35 training photos"), "{line}");
+    for name in &names {
+        assert!(line.contains(name.as_str()), "{name} not named: {line}");
+    }
+    let metrics = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
+    assert!(metrics.contains("\"dropped_views\":4.0"), "{metrics}");
+}
+
 #[test]
 fn sfm_refuses_what_it_cannot_pose() {
     let dir = tempfile::tempdir().unwrap();

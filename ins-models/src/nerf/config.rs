@@ -84,6 +84,11 @@ pub struct NerfRunConfig {
     /// patch (64², 4096 rays) runs directly.
     #[arg(long, default_value_t = 4096)]
     pub backprop_chunk: usize,
+    /// Pretraining a capture (COLMAP, transforms.json): after 30 % of the steps, the training
+    /// photos that fit the field 6 dB or more below the median (posed wrongly by structure
+    /// from motion or a phone's tracking) are named and left out; `false` keeps every photo.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub drop_misposed: bool,
 }
 
 impl Default for NerfRunConfig {

@@ -24,6 +24,7 @@ pub mod render;
 pub mod run;
 pub mod state_io;
 pub mod task;
+pub mod view_audit;
 
 pub use config::NerfRunConfig;
 pub use model::NerfModel;

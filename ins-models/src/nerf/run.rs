@@ -181,16 +181,18 @@ impl Variant for Nerf {
                     .then(|| fresh_grid(&data.scene, cfg.occupancy_resolution));
                 write_scene_frame(&data.scene, &folder.scene_frame())?;
                 let eval = eval_schedule(cfg, &data.scene, folder);
-                Ok(NerfTask::new(
-                    data.scene,
-                    sampler(cfg, true),
-                    grid,
-                    None,
-                    eval,
-                    device,
-                ))
+                let audit = (cfg.drop_misposed && super::view_audit::audits_views(&data.scene))
+                    .then(|| {
+                        let steps = cfg.pretrain_steps_for(data.scene.forward_facing);
+                        (super::view_audit::AUDIT_AT * steps as f64).round() as usize
+                    });
+                let task = NerfTask::new(data.scene, sampler(cfg, true), grid, None, eval, device);
+                Ok(match audit {
+                    Some(at) => task.with_view_audit(at),
+                    None => task,
+                })
             }
-            Start::From(base) => {
+            Start::From(mut base) => {
                 let perceptual = style.context("stylizing needs the paintings' loss")?;
                 let scene = base.data.scene;
                 let (w, h) = scene.resolution();
@@ -214,12 +216,12 @@ impl Variant for Nerf {
                 Ok(NerfTask::new(
                     scene,
                     sampler(cfg, false),
-                    base.extra.grid,
+                    base.extra.grid.take(),
                     Some(style),
                     eval,
                     device,
                 )
-                .with_learned_background(base.extra.background))
+                .continuing(&base.extra))
             }
         }
     }

@@ -1,14 +1,22 @@
 //! The NeRF task's state in a checkpoint (`task.bin`): the running samples-per-ray, the
-//! occupancy grid and, since unbounded captures learn it, the background colour's running sums,
-//! in a small binary layout checked on reading (a damaged file is an error, never a huge
-//! allocation; a state written before the background was learned has none).
+//! occupancy grid, a boxed capture's learned background (its running sums) and the training
+//! photos the view audit dropped, in a small binary layout checked on reading (a damaged file
+//! is an error, never a huge allocation). States written before the audit (`INSNERF1`: the
+//! background as an optional trailing section, no dropped photos) are still read.
 
 use anyhow::{Result, bail, ensure};
 use ins_core::render::occupancy::OccupancyGrid;
 
 use super::background::LearnedBackground;
 
-const MAGIC: &[u8; 8] = b"INSNERF1";
+const MAGIC: &[u8; 8] = b"INSNERF2";
+/// The layout before the view audit: the background trailing, nothing after it.
+const MAGIC_V1: &[u8; 8] = b"INSNERF1";
+/// Flags after the grid: which optional sections follow.
+const HAS_BACKGROUND: u8 = 1;
+const HAS_DROPPED_VIEWS: u8 = 2;
+/// Most dropped views a state may list.
+const MAX_DROPPED: u32 = 1 << 20;
 /// Largest grid accepted: 512³ cells.
 const MAX_RESOLUTION: u32 = 512;
 
@@ -19,8 +27,10 @@ pub struct NerfState {
     pub samples_per_ray: f32,
     /// The occupancy grid (grid variant).
     pub grid: Option<OccupancyGrid>,
-    /// The learned background (unbounded captures).
+    /// The learned background (boxed captures).
     pub background: Option<LearnedBackground>,
+    /// Training views the audit found wrongly posed ([`super::view_audit`]), in order.
+    pub dropped_views: Vec<usize>,
 }
 
 /// Encodes the task state.
@@ -55,9 +65,23 @@ pub fn encode(state: &NerfState) -> Vec<u8> {
             out.extend(g.occupied.iter().map(|&o| o as u8));
         }
     }
+    let mut flags = 0;
+    if state.background.is_some() {
+        flags |= HAS_BACKGROUND;
+    }
+    if !state.dropped_views.is_empty() {
+        flags |= HAS_DROPPED_VIEWS;
+    }
+    out.push(flags);
     if let Some(b) = &state.background {
         for v in b.num.iter().chain([&b.den]) {
             out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    if !state.dropped_views.is_empty() {
+        out.extend_from_slice(&(state.dropped_views.len() as u32).to_le_bytes());
+        for &v in &state.dropped_views {
+            out.extend_from_slice(&(v as u32).to_le_bytes());
         }
     }
     out
@@ -86,7 +110,9 @@ impl Reader<'_> {
 /// Decodes what [`encode`] wrote.
 pub fn decode(bytes: &[u8]) -> Result<NerfState> {
     let mut r = Reader { bytes, at: 0 };
-    ensure!(r.take(8)? == MAGIC, "not a NeRF task state");
+    let magic = r.take(8)?;
+    let v1 = magic == MAGIC_V1;
+    ensure!(v1 || magic == MAGIC, "not a NeRF task state");
     let spr = r.f32()?;
     let grid = match r.take(1)?[0] {
         0 => None,
@@ -131,7 +157,20 @@ pub fn decode(bytes: &[u8]) -> Result<NerfState> {
         }
         other => bail!("bad grid marker {other} in the task state"),
     };
-    let background = if r.at < bytes.len() {
+    let flags = if v1 {
+        if r.at < bytes.len() {
+            HAS_BACKGROUND
+        } else {
+            0
+        }
+    } else {
+        r.take(1)?[0]
+    };
+    ensure!(
+        flags & !(HAS_BACKGROUND | HAS_DROPPED_VIEWS) == 0,
+        "unknown sections {flags:#x} in the task state"
+    );
+    let background = if flags & HAS_BACKGROUND != 0 {
         let num = [r.f32()?, r.f32()?, r.f32()?];
         let den = r.f32()?;
         ensure!(
@@ -142,11 +181,23 @@ pub fn decode(bytes: &[u8]) -> Result<NerfState> {
     } else {
         None
     };
+    let mut dropped_views = Vec::new();
+    if flags & HAS_DROPPED_VIEWS != 0 {
+        let n = r.u32()?;
+        ensure!(
+            n <= MAX_DROPPED,
+            "{n} dropped views in the task state is out of range"
+        );
+        for _ in 0..n {
+            dropped_views.push(r.u32()? as usize);
+        }
+    }
     ensure!(r.at == bytes.len(), "trailing bytes after the task state");
     Ok(NerfState {
         samples_per_ray: spr,
         grid,
         background,
+        dropped_views,
     })
 }
 
@@ -164,6 +215,7 @@ mod tests {
             samples_per_ray: spr,
             grid: grid.cloned(),
             background: None,
+            dropped_views: Vec::new(),
         };
         let b = encode(&state(12.5, Some(&g)));
         let back = decode(&b).unwrap();
@@ -188,5 +240,38 @@ mod tests {
         let at = nan.len() - 4;
         nan[at..].copy_from_slice(&f32::NAN.to_le_bytes());
         assert!(decode(&nan).is_err());
+        // Dropped views, with or without a background; cut or unknown sections are errors.
+        let mut dropped = with_bg.clone();
+        dropped.dropped_views = vec![7, 2, 30];
+        let bytes = encode(&dropped);
+        assert_eq!(decode(&bytes).unwrap(), dropped);
+        assert!(decode(&bytes[..bytes.len() - 1]).is_err());
+        dropped.background = None;
+        assert_eq!(decode(&encode(&dropped)).unwrap(), dropped);
+        let mut unknown = encode(&state(3.0, None));
+        let last = unknown.len() - 1;
+        unknown[last] = 0x80;
+        assert!(decode(&unknown).is_err());
+    }
+
+    #[test]
+    fn states_written_before_the_audit_are_read() {
+        // INSNERF1: the grid marker, then the background's 16 bytes when learned.
+        let mut v1 = b"INSNERF1".to_vec();
+        v1.extend_from_slice(&12.0f32.to_le_bytes());
+        v1.push(0);
+        assert_eq!(decode(&v1).unwrap().background, None);
+        for v in [0.5f32, 1.0, 2.0, 2.5] {
+            v1.extend_from_slice(&v.to_le_bytes());
+        }
+        let back = decode(&v1).unwrap();
+        assert_eq!(
+            back.background,
+            Some(LearnedBackground {
+                num: [0.5, 1.0, 2.0],
+                den: 2.5
+            })
+        );
+        assert!(back.dropped_views.is_empty());
     }
 }

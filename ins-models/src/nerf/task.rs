@@ -114,6 +114,11 @@ pub struct NerfTask {
     pub background: [f32; 3],
     /// The learned background's running sums (object captures in a box).
     learned_background: Option<LearnedBackground>,
+    /// Pretraining step (in its phase) after which the training photos are audited
+    /// ([`view_audit`](super::view_audit)); `None`: never.
+    audit_at: Option<usize>,
+    /// Training views the audit left out, worst first.
+    dropped_views: Vec<usize>,
     device: Device,
     last_samples: usize,
     last_rays: usize,
@@ -145,24 +150,85 @@ impl NerfTask {
             eval,
             background,
             learned_background,
+            audit_at: None,
+            dropped_views: Vec::new(),
             device: device.clone(),
             last_samples: 0,
             last_rays: 0,
         }
     }
 
-    /// Starts from a pretrained run's learned background (stylization keeps it).
-    pub fn with_learned_background(mut self, learned: Option<LearnedBackground>) -> Self {
-        self.adopt_background(learned);
+    /// Continues from a pretrained run's state: its learned background and the photos its
+    /// audit left out (stylization keeps both).
+    pub fn continuing(mut self, state: &NerfState) -> Self {
+        self.adopt(state);
         self
     }
 
-    /// Takes over a learned background's sums and the colour they give.
-    fn adopt_background(&mut self, learned: Option<LearnedBackground>) {
-        if let Some(b) = learned {
+    /// Audits the training photos once `steps_in` steps of pretraining are done (a capture's;
+    /// see [`view_audit`](super::view_audit)).
+    pub fn with_view_audit(mut self, steps_in: usize) -> Self {
+        self.audit_at = Some(steps_in.max(1));
+        self
+    }
+
+    /// Takes over a state's learned background (its sums and the colour they give) and
+    /// leaves out the photos it dropped.
+    fn adopt(&mut self, state: &NerfState) {
+        if let Some(b) = state.background {
             self.background = b.colour(self.background);
             self.learned_background = Some(b);
         }
+        self.drop_views(&state.dropped_views);
+    }
+
+    fn drop_views(&mut self, views: &[usize]) {
+        self.scene.train.retain(|v| !views.contains(v));
+        for &v in views {
+            if !self.dropped_views.contains(&v) {
+                self.dropped_views.push(v);
+            }
+        }
+    }
+
+    /// Scores every training photo against the field and leaves out those posed wrongly,
+    /// naming them. Returns how many were dropped.
+    fn audit_views(&mut self, model: &NerfModel, seed: u64) -> Result<usize> {
+        let model = model.valid();
+        let device = self.device.clone().inner();
+        let fits = super::view_audit::fit_views(
+            &model,
+            &self.scene,
+            &self.scene.train,
+            self.sampling(),
+            self.background,
+            seed,
+            &device,
+        )?;
+        let out = super::view_audit::outliers(&fits);
+        if out.is_empty() {
+            return Ok(0);
+        }
+        let median = super::view_audit::median_psnr(&fits);
+        let names: Vec<String> = out
+            .iter()
+            .map(|f| {
+                let path = &self.scene.views[f.view].path;
+                let name = path.file_name().unwrap_or(path.as_os_str());
+                format!("{} ({:.1} dB)", name.to_string_lossy(), f.psnr)
+            })
+            .collect();
+        eprintln!(
+            "{} of {} training photos fit far below the others (median {median:.1} dB): {}; \
+             their poses are likely wrong, training goes on without them \
+             (--drop-misposed false keeps them)",
+            out.len(),
+            fits.len(),
+            names.join(", ")
+        );
+        let views: Vec<usize> = out.iter().map(|f| f.view).collect();
+        self.drop_views(&views);
+        Ok(views.len())
     }
 
     /// Fits the learned background to a batch (see [`LearnedBackground`]): `pred` rendered over
@@ -472,13 +538,18 @@ impl Task for NerfTask {
             self.refresh_grid(model, step.step_in_phase, step.seed ^ 0x0cc0_9a1d);
         }
         let done = step.step_in_phase + 1;
+        let mut logged = Vec::new();
+        if step.phase.objective == NerfObjective::Pretrain && self.audit_at == Some(done) {
+            let dropped = self.audit_views(model, step.seed ^ 0xa0d1_7000)?;
+            logged.push(("dropped_views".to_string(), dropped as f64));
+        }
         if self.eval.every > 0
             && done.is_multiple_of(self.eval.every)
             && !self.eval.views.is_empty()
         {
-            return self.evaluate(model, step.global_step + 1);
+            logged.extend(self.evaluate(model, step.global_step + 1)?);
         }
-        Ok(Vec::new())
+        Ok(logged)
     }
 
     fn save_state(&self) -> Result<Option<Vec<u8>>> {
@@ -486,16 +557,17 @@ impl Task for NerfTask {
             samples_per_ray: self.samples_per_ray,
             grid: self.grid.clone(),
             background: self.learned_background,
+            dropped_views: self.dropped_views.clone(),
         })))
     }
 
     fn load_state(&mut self, bytes: &[u8]) -> Result<()> {
-        let state = super::state_io::decode(bytes)?;
+        let mut state = super::state_io::decode(bytes)?;
         self.samples_per_ray = state.samples_per_ray;
-        if state.grid.is_some() {
-            self.grid = state.grid;
+        if let Some(grid) = state.grid.take() {
+            self.grid = Some(grid);
         }
-        self.adopt_background(state.background);
+        self.adopt(&state);
         Ok(())
     }
 }
