@@ -47,27 +47,40 @@ fn train_and_evaluate(scene: &std::path::Path, run: &std::path::Path) -> serde_j
     serde_json::from_str(text.lines().last().expect("a mean line")).unwrap()
 }
 
+/// Writes a synthetic capture (`data synth`, 40 views 64 px wide) in `format` (colmap,
+/// transforms) and `layout` (object, studio), with `extra` flags.
+fn synth_capture(scene: &std::path::Path, format: &str, layout: &str, extra: &[&str]) {
+    let mut args = vec![
+        "data",
+        "synth",
+        "--format",
+        format,
+        "--layout",
+        layout,
+        "--out",
+        s(scene),
+        "--size",
+        "64",
+        "--views",
+        "40",
+    ];
+    args.extend_from_slice(extra);
+    ok(cli(&args));
+}
+
+/// What `data check` prints about `scene`.
+fn check_report(scene: &std::path::Path) -> String {
+    let o = ok(cli(&["data", "check", s(scene), "--no-sheet"]));
+    String::from_utf8_lossy(&o.stdout).to_string()
+}
+
 #[test]
 fn a_capture_with_background_checks_and_trains() {
     let dir = tempfile::tempdir().unwrap();
     for (format, extra) in [("colmap", vec!["--text"]), ("transforms", vec![])] {
         let scene = dir.path().join(format);
-        let mut args = vec![
-            "data",
-            "synth",
-            "--format",
-            format,
-            "--out",
-            s(&scene),
-            "--size",
-            "64",
-            "--views",
-            "40",
-        ];
-        args.extend(extra);
-        ok(cli(&args));
-        let o = ok(cli(&["data", "check", s(&scene), "--no-sheet"]));
-        let text = String::from_utf8_lossy(&o.stdout).to_string();
+        synth_capture(&scene, format, "object", &extra);
+        let text = check_report(&scene);
         assert!(text.contains(&format!("({format})")), "{text}");
         assert!(text.contains("object-centred, unbounded"), "{text}");
         assert!(text.contains("lens     Polynomial"), "{text}");
@@ -105,22 +118,8 @@ fn a_capture_with_background_checks_and_trains() {
 fn a_capture_before_a_plain_backdrop_learns_it_as_the_background() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("studio");
-    ok(cli(&[
-        "data",
-        "synth",
-        "--format",
-        "colmap",
-        "--layout",
-        "studio",
-        "--out",
-        s(&scene),
-        "--size",
-        "64",
-        "--views",
-        "40",
-    ]));
-    let o = ok(cli(&["data", "check", s(&scene), "--no-sheet"]));
-    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    synth_capture(&scene, "colmap", "studio", &[]);
+    let text = check_report(&scene);
     assert!(text.contains("object-centred: box of half side"), "{text}");
     let run = dir.path().join("run");
     let mean = train_and_evaluate(&scene, &run);
@@ -147,20 +146,7 @@ fn a_capture_before_a_plain_backdrop_learns_it_as_the_background() {
 /// Record3D export them) into `dir/name` and returns it with `data check`'s report.
 fn capture_without_points(dir: &std::path::Path, layout: &str) -> (std::path::PathBuf, String) {
     let scene = dir.join(layout);
-    ok(cli(&[
-        "data",
-        "synth",
-        "--format",
-        "transforms",
-        "--layout",
-        layout,
-        "--out",
-        s(&scene),
-        "--size",
-        "64",
-        "--views",
-        "40",
-    ]));
+    synth_capture(&scene, "transforms", layout, &[]);
     let json = scene.join("transforms.json");
     let mut doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
@@ -170,8 +156,8 @@ fn capture_without_points(dir: &std::path::Path, layout: &str) -> (std::path::Pa
         "the synthetic capture names its points: {doc}"
     );
     std::fs::write(&json, doc.to_string()).unwrap();
-    let o = ok(cli(&["data", "check", s(&scene), "--no-sheet"]));
-    (scene, String::from_utf8_lossy(&o.stdout).to_string())
+    let report = check_report(&scene);
+    (scene, report)
 }
 
 /// Without sparse points, only the photos say how large a capture's box must be. Before a plain
@@ -220,20 +206,7 @@ fn a_capture_without_points_before_a_backdrop_gets_the_box_its_photos_share() {
 fn misposed_photos_are_found_and_left_out() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("capture");
-    ok(cli(&[
-        "data",
-        "synth",
-        "--format",
-        "transforms",
-        "--layout",
-        "studio",
-        "--out",
-        s(&scene),
-        "--size",
-        "64",
-        "--views",
-        "40",
-    ]));
+    synth_capture(&scene, "transforms", "studio", &[]);
     let json = scene.join("transforms.json");
     let mut doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
