@@ -274,6 +274,51 @@ fn misposed_photos_are_found_and_left_out() {
     }
     let metrics = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
     assert!(metrics.contains("\"dropped_views\":4.0"), "{metrics}");
+
+    // The checkpoint keeps them out, and a stylization of the run leaves them out too.
+    let dropped = |run: &std::path::Path| {
+        let checkpoints = run.join("checkpoints");
+        let latest = std::fs::read_to_string(checkpoints.join("latest")).unwrap();
+        let bytes = std::fs::read(checkpoints.join(latest.trim()).join("task.bin")).unwrap();
+        let mut views = ins_models::nerf::state_io::decode(&bytes)
+            .unwrap()
+            .dropped_views;
+        views.sort();
+        views
+    };
+    let left_out = dropped(&run);
+    assert_eq!(left_out.len(), 4, "{left_out:?}");
+    let style = dir.path().join("style.png");
+    image::RgbImage::from_fn(32, 32, |x, y| {
+        image::Rgb([(x * 8) as u8, (y * 8) as u8, 200])
+    })
+    .save(&style)
+    .unwrap();
+    let stylized = dir.path().join("stylized");
+    ok(cli(&[
+        "train",
+        "nerf",
+        "--from",
+        s(&run),
+        "--style",
+        s(&style),
+        "--out",
+        s(&stylized),
+        "--steps",
+        "2",
+        "--patch",
+        "12",
+        "--stride",
+        "1",
+        "--style-size",
+        "32",
+        "--eval-every",
+        "0",
+        "--quiet",
+        "--backend",
+        "flex",
+    ]));
+    assert_eq!(dropped(&stylized), left_out);
 }
 
 #[test]
