@@ -288,36 +288,14 @@ fn misposed_photos_are_found_and_left_out() {
     };
     let left_out = dropped(&run);
     assert_eq!(left_out.len(), 4, "{left_out:?}");
-    let style = dir.path().join("style.png");
-    image::RgbImage::from_fn(32, 32, |x, y| {
-        image::Rgb([(x * 8) as u8, (y * 8) as u8, 200])
-    })
-    .save(&style)
-    .unwrap();
+    let style = gradient_painting(&dir.path().join("style.png"));
     let stylized = dir.path().join("stylized");
-    ok(cli(&[
-        "train",
-        "nerf",
-        "--from",
-        s(&run),
-        "--style",
-        s(&style),
-        "--out",
-        s(&stylized),
-        "--steps",
-        "2",
-        "--patch",
-        "12",
-        "--stride",
-        "1",
-        "--style-size",
-        "32",
-        "--eval-every",
-        "0",
-        "--quiet",
-        "--backend",
-        "flex",
-    ]));
+    ok(stylize_nerf(
+        &run,
+        &[&style],
+        &stylized,
+        &["--steps", "2", "--patch", "12", "--style-size", "32"],
+    ));
     assert_eq!(dropped(&stylized), left_out);
 }
 

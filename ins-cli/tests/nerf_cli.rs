@@ -122,38 +122,14 @@ fn pretrain_render_eval_stylize_and_refuse_bad_input() {
     assert!(lines[0]["psnr"].as_f64().unwrap() > 5.0);
 
     // Stylize with the generated demo painting, then render a mix and evaluate depth.
-    let style = dir.path().join("style.png");
-    image::RgbImage::from_fn(32, 32, |x, y| {
-        image::Rgb([(x * 8) as u8, (y * 8) as u8, 200])
-    })
-    .save(&style)
-    .unwrap();
+    let style = gradient_painting(&dir.path().join("style.png"));
     let st = dir.path().join("stylized");
-    ok(cli(&[
-        "train",
-        "nerf",
-        "--from",
-        s(&run),
-        "--style",
-        s(&style),
-        "--style",
-        s(&style),
-        "--out",
-        s(&st),
-        "--steps",
-        "4",
-        "--patch",
-        "12",
-        "--stride",
-        "1",
-        "--style-size",
-        "32",
-        "--eval-every",
-        "0",
-        "--quiet",
-        "--backend",
-        "flex",
-    ]));
+    ok(stylize_nerf(
+        &run,
+        &[&style, &style],
+        &st,
+        &["--steps", "4", "--patch", "12", "--style-size", "32"],
+    ));
     let mix = dir.path().join("mix.png");
     ok(cli(&[
         "render",

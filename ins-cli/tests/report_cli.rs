@@ -55,29 +55,12 @@ fn stylized_run(dir: &Path) -> PathBuf {
     .save(&style)
     .unwrap();
     let st = dir.join("stylized");
-    ok(cli(&[
-        "train",
-        "nerf",
-        "--from",
-        s(&run),
-        "--style",
-        s(&style),
-        "--out",
-        s(&st),
-        "--steps",
-        "4",
-        "--patch",
-        "16",
-        "--stride",
-        "1",
-        "--style-size",
-        "32",
-        "--eval-every",
-        "0",
-        "--quiet",
-        "--backend",
-        "flex",
-    ]));
+    ok(stylize_nerf(
+        &run,
+        &[&style],
+        &st,
+        &["--steps", "4", "--patch", "16", "--style-size", "32"],
+    ));
     st
 }
 

@@ -87,3 +87,34 @@ pub fn synth_scene(dir: &Path, format: &str, size: u32, views: u32) -> std::path
     ]));
     scene
 }
+
+/// Writes a 32×32 painting (red across, green down, blue 200) to `path` and returns it.
+pub fn gradient_painting(path: &Path) -> std::path::PathBuf {
+    image::RgbImage::from_fn(32, 32, |x, y| {
+        image::Rgb([(x * 8) as u8, (y * 8) as u8, 200])
+    })
+    .save(path)
+    .unwrap();
+    path.to_path_buf()
+}
+
+/// A short stylization of the NeRF run `run` on flex into `out` with `styles` in order
+/// (full-resolution patches, no evaluation, quiet); `extra` gives the steps, patch size and
+/// anything else the test needs.
+pub fn stylize_nerf(run: &Path, styles: &[&Path], out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["train", "nerf", "--from", s(run), "--out", s(out)];
+    for style in styles {
+        args.extend(["--style", s(style)]);
+    }
+    args.extend([
+        "--stride",
+        "1",
+        "--eval-every",
+        "0",
+        "--quiet",
+        "--backend",
+        "flex",
+    ]);
+    args.extend_from_slice(extra);
+    cli(&args)
+}
