@@ -281,7 +281,7 @@ pub fn eval(a: EvalNerf) -> Result<()> {
 /// audit does for training photos: a photo posed wrongly by structure from motion scores the
 /// poses, not the field. The mean above keeps them; the note gives the mean without them.
 fn note_misposed_views(scene: &ins_scene::data::Scene, evals: &[ins_models::nerf::eval::ViewEval]) {
-    use ins_models::nerf::view_audit::{ViewFit, median_psnr, outliers};
+    use ins_models::nerf::view_audit::{ViewFit, median_psnr, outliers, photo_name};
     let fits: Vec<ViewFit> = evals
         .iter()
         .map(|e| ViewFit {
@@ -296,14 +296,8 @@ fn note_misposed_views(scene: &ins_scene::data::Scene, evals: &[ins_models::nerf
     let names: Vec<String> = out
         .iter()
         .map(|f| {
-            let path = &scene.views[f.view].path;
-            let name = path.file_name().unwrap_or(path.as_os_str());
-            format!(
-                "view {} ({}, {:.1} dB)",
-                f.view,
-                name.to_string_lossy(),
-                f.psnr
-            )
+            let name = photo_name(scene, f.view);
+            format!("view {} ({name}, {:.1} dB)", f.view, f.psnr)
         })
         .collect();
     let rest: Vec<f64> = fits

@@ -213,9 +213,8 @@ impl NerfTask {
         let names: Vec<String> = out
             .iter()
             .map(|f| {
-                let path = &self.scene.views[f.view].path;
-                let name = path.file_name().unwrap_or(path.as_os_str());
-                format!("{} ({:.1} dB)", name.to_string_lossy(), f.psnr)
+                let name = super::view_audit::photo_name(&self.scene, f.view);
+                format!("{name} ({:.1} dB)", f.psnr)
             })
             .collect();
         eprintln!(

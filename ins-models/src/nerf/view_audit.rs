@@ -106,9 +106,7 @@ pub fn outliers(fits: &[ViewFit]) -> Vec<ViewFit> {
     if fits.len() < 5 {
         return Vec::new();
     }
-    let mut sorted: Vec<f64> = fits.iter().map(|f| f.psnr).collect();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
+    let median = median_psnr(fits);
     let mut out: Vec<ViewFit> = fits
         .iter()
         .filter(|f| f.psnr < median - OUTLIER_DB)
@@ -121,7 +119,16 @@ pub fn outliers(fits: &[ViewFit]) -> Vec<ViewFit> {
     out
 }
 
-/// The median PSNR of `fits` (for messages).
+/// A photo's file name (for messages naming it).
+pub fn photo_name(scene: &Scene, view: usize) -> String {
+    let path = &scene.views[view].path;
+    path.file_name()
+        .unwrap_or(path.as_os_str())
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// The median PSNR of `fits`.
 pub fn median_psnr(fits: &[ViewFit]) -> f64 {
     let mut sorted: Vec<f64> = fits.iter().map(|f| f.psnr).collect();
     sorted.sort_by(f64::total_cmp);
