@@ -168,7 +168,7 @@ impl<C: ContentModule> ImageTask<C> {
             .metric_of("psnr", "mse", psnr))
     }
 
-    fn stylize_losses(&mut self, model: &Ins<C>, seed: u64) -> Result<LossTerms> {
+    fn stylize_losses(&mut self, model: &Ins<C>, seed: u64, lr: f64) -> Result<LossTerms> {
         let (w, h) = (self.content.width as u32, self.content.height as u32);
         let mut rng = SmallRng::seed_from_u64(seed);
         let (x0, y0) = self.patch.random_origin(w, h, &mut rng)?;
@@ -180,12 +180,11 @@ impl<C: ContentModule> ImageTask<C> {
             .collect();
         let (coords, target) = self.gather(&idx);
         let target_key = (x0, y0);
+        let photo = patch_images(target, 1, k).detach();
         let content_target = match self.content_cache.get(&target_key) {
             Some(t) => t.clone(),
             None => {
-                let t = self
-                    .perceptual
-                    .content_target(patch_images(target, 1, k).detach());
+                let t = self.perceptual.content_target(photo.clone());
                 if self.content_cache.len() < 256 {
                     self.content_cache.insert(target_key, t.clone());
                 }
@@ -195,10 +194,12 @@ impl<C: ContentModule> ImageTask<C> {
         let perceptual = &self.perceptual;
         let rgb = model.forward(coords, perceptual.codes.clone());
         let images = patch_images(rgb, perceptual.n_styles(), k);
+        let probe = perceptual.saturation_probe(images.clone(), photo, lr);
         let (style, content) = perceptual.terms(images, &content_target);
         Ok(LossTerms::default()
             .term("style", style)
-            .term("content", content))
+            .term("content", content)
+            .probe(probe))
     }
 }
 
@@ -216,7 +217,9 @@ impl<C: ContentModule> Task for ImageTask<C> {
     fn losses(&mut self, model: &Ins<C>, step: &StepContext<ImageObjective>) -> Result<LossTerms> {
         match step.phase.objective {
             ImageObjective::Fit => self.fit_losses(model, step.seed),
-            ImageObjective::Stylize => self.stylize_losses(model, step.seed),
+            ImageObjective::Stylize => {
+                self.stylize_losses(model, step.seed, step.phase.lr.at(step.step_in_phase))
+            }
         }
     }
 }

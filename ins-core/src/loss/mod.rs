@@ -9,6 +9,7 @@ pub mod gram;
 pub mod gram_op;
 pub mod perceptual;
 pub mod pixel;
+pub mod saturation;
 pub mod ssim;
 pub mod style;
 pub mod weights;

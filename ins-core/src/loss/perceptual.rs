@@ -3,8 +3,11 @@
 use burn::prelude::*;
 use vgg_import::{Vgg, VggFeatures};
 
+use crate::train::Probe;
+
 use super::color_transfer::ColorTransfer;
 use super::gram::gram;
+use super::saturation::{collapse_probe, pure_share};
 use super::style::{MatchGuide, StyleLoss, StyleTargets, UNGUIDED_RADIUS};
 
 /// Gram matrices of a style image at the four style layers, each `[1, C, C]`.
@@ -127,6 +130,9 @@ pub struct PerceptualLoss {
     /// The radius at the texture layers (relu3_3, relu4_3), where it differs from
     /// `match_radius` (which then holds at the palette layers, relu1_2 and relu2_2).
     pub texture_match_radius: Option<f32>,
+    /// The largest share of pure pixels (black, white, primaries) among the paintings, as the
+    /// loss sees them: how much of a render may go pure without having collapsed.
+    pub painting_pure_share: f32,
 }
 
 impl PerceptualLoss {
@@ -139,10 +145,8 @@ impl PerceptualLoss {
         kind: StyleLoss,
         device: &Device,
     ) -> Self {
-        let paintings: Vec<Tensor<4>> = styles
-            .iter()
-            .map(|s| s.fit_within(style_size).to_tensor(device))
-            .collect();
+        let fitted: Vec<_> = styles.iter().map(|s| s.fit_within(style_size)).collect();
+        let paintings: Vec<Tensor<4>> = fitted.iter().map(|s| s.to_tensor(device)).collect();
         let targets = StyleTargets::from_images(kind, &vgg, &paintings);
         Self {
             vgg,
@@ -151,6 +155,10 @@ impl PerceptualLoss {
             recolor: None,
             match_radius: None,
             texture_match_radius: None,
+            painting_pure_share: fitted
+                .iter()
+                .map(|p| pure_share(&p.data))
+                .fold(0.0, f32::max),
         }
     }
 
@@ -230,6 +238,13 @@ impl PerceptualLoss {
             guide: self.targets.match_guide(&features, self.match_radii()),
             relu2_2: features.relu2_2.detach(),
         }
+    }
+
+    /// The probe that watches the renders `[S, 3, K, K]` of a stylization step at `lr` for a
+    /// collapse to pure colours where the photo `[1, 3, K, K]` is coloured
+    /// ([`collapse_probe`], against the paintings' own pure share).
+    pub fn saturation_probe(&self, renders: Tensor<4>, photo: Tensor<4>, lr: f64) -> Probe {
+        collapse_probe(renders, photo, self.painting_pure_share, lr)
     }
 
     /// The `style` and `content` terms of rendered images `[S, 3, H, W]` against the targets

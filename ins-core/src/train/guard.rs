@@ -14,10 +14,14 @@ pub struct StepValues {
     pub terms: Vec<(&'static str, f64)>,
     /// The weighted total's value.
     pub total_value: f64,
+    /// Each probe's value, in the order of [`LossTerms::probes`] (not checked: a probe only
+    /// reports).
+    pub probes: Vec<f64>,
 }
 
 impl StepValues {
-    /// Weights and sums the terms, then reads every term and the total back in one transfer.
+    /// Weights and sums the terms, then reads every term, the total and the probes back in
+    /// one transfer.
     /// A term that is NaN or infinite is [`TrainError::Diverged`]; a finite set of terms
     /// whose weighted sum is not finite is [`TrainError::WeightOverflow`].
     pub fn read<O>(
@@ -46,6 +50,7 @@ impl StepValues {
             .iter()
             .map(|(_, t)| t.clone())
             .chain(std::iter::once(total.clone()))
+            .chain(terms.probes.iter().map(|p| p.value.clone()))
             .map(|t| t.detach())
             .collect();
         let values = Tensor::cat(read, 0)
@@ -84,6 +89,10 @@ impl StepValues {
                 .map(|((n, _), &v)| (*n, v as f64))
                 .collect(),
             total_value: total_value as f64,
+            probes: values[terms.terms.len() + 1..]
+                .iter()
+                .map(|&v| v as f64)
+                .collect(),
         })
     }
 }

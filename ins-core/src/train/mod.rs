@@ -15,11 +15,12 @@ pub mod schedule;
 pub mod seeding;
 pub mod task;
 pub mod trainer;
+pub mod watch;
 
 pub use error::TrainError;
 pub use folder::{RunFolder, RunLock};
 pub use groups::{GroupSetting, GroupSpec, Optimizable, ParamGroups};
 pub use phase::{Objective, Phase};
 pub use schedule::LrSchedule;
-pub use task::{LossTerms, StepContext, Task};
+pub use task::{LossTerms, Probe, StepContext, Task, Watch};
 pub use trainer::{Stepper, TrainOptions, TrainOutcome, Trainer, adam, step_seed};

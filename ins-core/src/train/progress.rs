@@ -38,6 +38,11 @@ impl Progress {
         self.bar.println(line);
     }
 
+    /// Prints a warning on stderr, quiet or not, without breaking the bar's line.
+    pub fn warn(&self, line: impl AsRef<str>) {
+        self.bar.suspend(|| eprintln!("{}", line.as_ref()));
+    }
+
     /// Leaves the bar at its final state.
     pub fn finish(&self) {
         self.bar.finish();

@@ -27,6 +27,9 @@ pub struct LossTerms {
     pub terms: Vec<(&'static str, Tensor<1>)>,
     /// Extra logged numbers.
     pub metrics: Vec<(String, f64)>,
+    /// Numbers computed on the device, read with the terms in their one transfer and logged;
+    /// the trainer warns when a watched one stays past its limit.
+    pub probes: Vec<Probe>,
     /// Logged numbers computed from a term's value once the trainer has read it (e.g. PSNR
     /// from MSE), so the task does not read the term a second time.
     pub derived: Vec<Derived>,
@@ -53,6 +56,12 @@ impl LossTerms {
         self
     }
 
+    /// Adds a probe (see [`LossTerms::probes`]).
+    pub fn probe(mut self, probe: Probe) -> Self {
+        self.probes.push(probe);
+        self
+    }
+
     /// Adds a logged metric.
     pub fn metric(mut self, name: &str, value: f64) -> Self {
         self.metrics.push((name.to_string(), value));
@@ -64,6 +73,28 @@ impl LossTerms {
         self.derived.push((name, term, f));
         self
     }
+}
+
+/// A number of the step computed on the device (`[1]`, detached), logged under `name`.
+pub struct Probe {
+    /// Its name in the metrics.
+    pub name: &'static str,
+    /// Its value, `[1]`.
+    pub value: Tensor<1>,
+    /// When the trainer should warn about it.
+    pub watch: Option<Watch>,
+}
+
+/// A probe's limit: above `limit` for `steps` steps in a row, the trainer prints `warning` once
+/// (with the step and the value) and goes on: the run may still be what the user wants.
+#[derive(Debug, Clone)]
+pub struct Watch {
+    /// The value above which a step counts.
+    pub limit: f64,
+    /// How many steps in a row make the warning.
+    pub steps: usize,
+    /// What it means and what to do, in a sentence or two.
+    pub warning: String,
 }
 
 /// A training task: a model, the terms each objective produces, and how to compute them.

@@ -22,6 +22,7 @@ use super::phase::{Objective, Phase};
 use super::plot::plot_history;
 use super::progress::{FirstStep, Progress};
 use super::task::{StepContext, Task};
+use super::watch::ProbeWatch;
 
 /// Run-level options.
 #[derive(Debug, Clone)]
@@ -163,6 +164,7 @@ impl<O: Objective> Trainer<O> {
         let t0 = Instant::now();
         let mut last = BTreeMap::new();
         let mut current_phase = None;
+        let mut watch = ProbeWatch::default();
         let mut step = start;
         while step < total && self.opts.stop_after.is_none_or(|n| step - start < n) {
             let (pi, in_phase) = self.phase_at(step);
@@ -195,6 +197,9 @@ impl<O: Objective> Trainer<O> {
             let mut terms = task.losses(&model, &ctx)?;
             check_declared(&terms, phase, task.terms(phase.objective))?;
             let values = StepValues::read(&terms, phase, step, lr, || store.latest_path())?;
+            for warning in watch.observe(&terms.probes, &values.probes, step) {
+                progress.warn(warning);
+            }
             // Parameters that produced a finite loss are the ones checkpointed.
             if let Some(task_state) = task_state {
                 state.step = step;
@@ -236,6 +241,10 @@ impl<O: Objective> Trainer<O> {
             for (name, v) in terms.metrics.iter().chain(&extra) {
                 last.insert(name.clone(), *v);
                 record.insert(name.clone(), (*v).into());
+            }
+            for (probe, &v) in terms.probes.iter().zip(&values.probes) {
+                last.insert(probe.name.to_string(), v);
+                record.insert(probe.name.to_string(), v.into());
             }
             record.insert("loss".into(), values.total_value.into());
             record.insert("lr".into(), lr.into());
@@ -431,6 +440,13 @@ impl<O: Objective> Stepper<O> {
             terms.gradients.take(),
         );
         let mut metrics = terms.metrics.clone();
+        metrics.extend(
+            terms
+                .probes
+                .iter()
+                .zip(&values.probes)
+                .map(|(p, &v)| (p.name.to_string(), v)),
+        );
         metrics.extend(task.after_step(&model, &ctx)?);
         self.step += 1;
         Ok((model, values.total_value, metrics))

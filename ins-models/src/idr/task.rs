@@ -222,7 +222,7 @@ impl IdrTask {
         Ok(terms.term("eikonal", eik))
     }
 
-    fn stylize_losses(&self, model: &IdrModel, seed: u64) -> Result<LossTerms> {
+    fn stylize_losses(&self, model: &IdrModel, seed: u64, lr: f64) -> Result<LossTerms> {
         let style = self
             .style
             .as_ref()
@@ -254,11 +254,14 @@ impl IdrTask {
         } else {
             patch.batch.rgb.clone()
         };
-        let content_target = perceptual.content_target(photo_patch(&photo, k, &self.device));
+        let photo = photo_patch(&photo, k, &self.device);
+        let probe = perceptual.saturation_probe(images.clone(), photo.clone(), lr);
+        let content_target = perceptual.content_target(photo);
         let (style_term, content_term) = perceptual.terms(images, &content_target);
         Ok(LossTerms::default()
             .term("style", style_term)
             .term("content", content_term)
+            .probe(probe)
             .metric("hit_rate", out.hits.len() as f64 / (k * k) as f64)
             .metric("trace_ms", out.trace_ms))
     }
@@ -279,7 +282,9 @@ impl Task for IdrTask {
     fn losses(&mut self, model: &IdrModel, step: &StepContext<IdrObjective>) -> Result<LossTerms> {
         match step.phase.objective {
             IdrObjective::Pretrain => self.pretrain_losses(model, step.step_in_phase, step.seed),
-            IdrObjective::Stylize => self.stylize_losses(model, step.seed),
+            IdrObjective::Stylize => {
+                self.stylize_losses(model, step.seed, step.phase.lr.at(step.step_in_phase))
+            }
         }
     }
 

@@ -367,8 +367,9 @@ impl NerfTask {
         let rays = RenderRays::from_batch(&self.scene, &patch.batch);
         let perceptual = &style.perceptual;
         let photo = photo_patch(&patch.batch.rgb, k, &self.device);
-        let content_target = perceptual.content_target(photo);
+        let content_target = perceptual.content_target(photo.clone());
         let styles = perceptual.n_styles();
+        let lr = step.phase.lr.at(step.step_in_phase);
         self.last_rays = k * k;
         if k * k > style.backprop_chunk {
             let patch_render = PatchRender {
@@ -381,8 +382,11 @@ impl NerfTask {
             };
             let weight = |term: &str| step.phase.weight_of(term);
             let mut terms = None;
+            let mut probe = None;
             let loss = |pixels: Tensor<2>| {
-                let (s, c) = perceptual.terms(patch_images(pixels, styles, k), &content_target);
+                let images = patch_images(pixels, styles, k);
+                probe = Some(perceptual.saturation_probe(images.clone(), photo.clone(), lr));
+                let (s, c) = perceptual.terms(images, &content_target);
                 let total =
                     s.clone().mul_scalar(weight("style")) + c.clone().mul_scalar(weight("content"));
                 terms = Some((s.detach(), c.detach()));
@@ -405,6 +409,7 @@ impl NerfTask {
                 .term("style", style_term)
                 .term("content", content_term)
                 .term("geometry", geometry_sum)
+                .probe(probe.context("the loss was not evaluated")?)
                 .with_gradients(gradients)
                 .metric("samples_per_ray", samples as f64 / (k * k) as f64));
         }
@@ -419,6 +424,7 @@ impl NerfTask {
         );
         self.last_samples = out.samples;
         let images = patch_images(out.fine.rgb, styles, k);
+        let probe = perceptual.saturation_probe(images.clone(), photo, lr);
         let (style_term, content_term) = perceptual.terms(images, &content_target);
         let geometry = match &style.teacher {
             Some(teacher) => geometry_loss(teacher, out.points, out.raw),
@@ -428,6 +434,7 @@ impl NerfTask {
             .term("style", style_term)
             .term("content", content_term)
             .term("geometry", geometry)
+            .probe(probe)
             .metric(
                 "samples_per_ray",
                 self.last_samples as f64 / self.last_rays.max(1) as f64,
