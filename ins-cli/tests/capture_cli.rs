@@ -13,34 +13,11 @@ use common::*;
 /// mean colour gives 16.5 dB, and a box holding the dome (`aabb_scale` 8) 21.4 dB.
 const CAPTURE_PSNR_BAR: f64 = 20.0;
 
-/// A small grid NeRF: `NERF_TINY`'s network at twice the resolution, 600 steps.
-const CAPTURE_NERF: &[&str] = &[
-    "--steps",
-    "600",
-    "--target-samples",
-    "16384",
-    "--log2-table",
-    "14",
-    "--max-resolution",
-    "128",
-    "--occupancy-resolution",
-    "32",
-    "--eval-every",
-    "600",
-    "--eval-views",
-    "1",
-    "--checkpoint-every",
-    "600",
-    "--quiet",
-    "--backend",
-    "flex",
-];
-
-/// Trains the capture network (`CAPTURE_NERF`) on `scene` into `run` and returns the mean line
+/// Trains the capture network (`NERF_SMALL`) on `scene` into `run` and returns the mean line
 /// of `eval nerf` on its held-out views.
 fn train_and_evaluate(scene: &std::path::Path, run: &std::path::Path) -> serde_json::Value {
     let mut args = vec!["train", "nerf", "--scene", s(scene), "--out", s(run)];
-    args.extend_from_slice(CAPTURE_NERF);
+    args.extend_from_slice(NERF_SMALL);
     ok(cli(&args));
     let o = ok(cli(&["eval", "nerf", "--run", s(run), "--backend", "flex"]));
     let text = String::from_utf8_lossy(&o.stdout).to_string();
@@ -108,7 +85,7 @@ fn a_capture_with_background_checks_and_trains() {
 
 /// Objects before a plain backdrop (the `studio` layout: sparse points on the objects alone)
 /// are framed in a box, and the backdrop is learned as the background colour instead of being
-/// painted as haze in front of the cameras. Measured with `CAPTURE_NERF` (seeds 0–2, this
+/// painted as haze in front of the cameras. Measured with `NERF_SMALL` (seeds 0–2, this
 /// project's 2-core AMD EPYC, 2026-11-27): held-out PSNR 22.65 / 21.88 / 21.87 dB, SSIM 0.905
 /// / 0.891 / 0.893, the learned colour within 0.003 of the backdrop; the same capture
 /// contracted with a black background (the framing before): 21.38 / 21.96 / 22.29 dB, SSIM
@@ -162,7 +139,7 @@ fn capture_without_points(dir: &std::path::Path, layout: &str) -> (std::path::Pa
 
 /// Without sparse points, only the photos say how large a capture's box must be. Before a plain
 /// backdrop it is the box the photos all keep in view: the `studio` layout gets half side 3
-/// instead of the cameras' box of 6. Measured with `CAPTURE_NERF` (seeds 0–1, this project's
+/// instead of the cameras' box of 6. Measured with `NERF_SMALL` (seeds 0–1, this project's
 /// 2-core AMD EPYC, 2026-11-27): held-out PSNR 24.74 / 24.83 dB, SSIM 0.939 / 0.941; in the
 /// box of 6: 23.74 / 23.39 dB, SSIM 0.920 / 0.909. A room's walls at the edges keep the box of
 /// 6 (in the tight box the room capture lost 2.2–3.2 dB).
@@ -198,7 +175,7 @@ fn a_capture_without_points_before_a_backdrop_gets_the_box_its_photos_share() {
 /// capture's 44 across the object, turned half a turn; a phone's tracking drifts) are found by
 /// the audit after 30 % of pretraining, named, and left out, and no other photo is. Here four
 /// training photos of the studio capture are turned 35° about the vertical, in place. Measured
-/// with `CAPTURE_NERF` (this project's 2-core AMD EPYC, 2026-11-27): the four fit at 12.5–14.6
+/// with `NERF_SMALL` (this project's 2-core AMD EPYC, 2026-11-27): the four fit at 12.5–14.6
 /// dB against a median of 22.0 and are the four left out; held-out PSNR 22.18 / 21.69 dB (seeds
 /// 0 / 1) against 20.91 / 20.92 keeping them. (The same turn in the room capture goes
 /// unnoticed: there the four fit at 19.0–21.9 dB, within the others' 17.6–22.3.)
@@ -262,7 +239,7 @@ fn misposed_photos_are_found_and_left_out() {
 
     let run = dir.path().join("run");
     let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
-    args.extend_from_slice(CAPTURE_NERF);
+    args.extend_from_slice(NERF_SMALL);
     let err = stderr(&ok(cli(&args)));
     let line = err
         .lines()

@@ -35,7 +35,10 @@ fn quick_run_on_the_builtin_input_then_render_any_size_and_mix() {
     assert_eq!(summary["steps"], 20);
     // Its stylization phase watches the renders for a collapse to pure colours (none here).
     let saturated = summary["last"]["saturated"].as_f64();
-    assert!(saturated.is_some_and(|v| (0.0..0.5).contains(&v)), "{summary}");
+    assert!(
+        saturated.is_some_and(|v| (0.0..0.5).contains(&v)),
+        "{summary}"
+    );
     assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
     for f in [
         "stylized.png",

@@ -316,7 +316,10 @@ fn a_stylized_surface_is_evaluated_along_its_capture_arc_with_its_texture_on_the
     // The stylization watches its renders for a collapse to pure colours (none here).
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let saturated = summary["last"]["saturated"].as_f64();
-    assert!(saturated.is_some_and(|v| (0.0..0.5).contains(&v)), "{summary}");
+    assert!(
+        saturated.is_some_and(|v| (0.0..0.5).contains(&v)),
+        "{summary}"
+    );
     let out = dir.path().join("eval");
     let o = ok(cli(&[
         "eval",

@@ -306,33 +306,10 @@ fn a_stylization_whose_colours_collapse_is_told_with_the_way_out() {
     let dir = tempfile::tempdir().unwrap();
     let scene = synth_scene(dir.path(), "blender", 48, 16);
     let run = dir.path().join("run");
-    ok(cli(&[
-        "train",
-        "nerf",
-        "--scene",
-        s(&scene),
-        "--out",
-        s(&run),
-        "--downscale",
-        "1",
-        "--steps",
-        "600",
-        "--target-samples",
-        "16384",
-        "--log2-table",
-        "14",
-        "--max-resolution",
-        "128",
-        "--occupancy-resolution",
-        "32",
-        "--eval-every",
-        "0",
-        "--eval-views",
-        "1",
-        "--quiet",
-        "--backend",
-        "flex",
-    ]));
+    let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
+    args.extend_from_slice(NERF_SMALL);
+    args.extend(["--downscale", "1"]);
+    ok(cli(&args));
     // Red and blue stripes: no pure pixel, so the limit is half the object's pixels.
     let stripes = dir.path().join("stripes.png");
     image::RgbImage::from_fn(64, 64, |x, y| {

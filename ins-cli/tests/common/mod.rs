@@ -69,6 +69,29 @@ pub const NERF_TINY: &[&str] = &[
     "flex",
 ];
 
+/// A small grid NeRF: `NERF_TINY`'s network at twice the resolution, 600 steps.
+pub const NERF_SMALL: &[&str] = &[
+    "--steps",
+    "600",
+    "--target-samples",
+    "16384",
+    "--log2-table",
+    "14",
+    "--max-resolution",
+    "128",
+    "--occupancy-resolution",
+    "32",
+    "--eval-every",
+    "600",
+    "--eval-views",
+    "1",
+    "--checkpoint-every",
+    "600",
+    "--quiet",
+    "--backend",
+    "flex",
+];
+
 /// Writes a `data synth` scene of `format` (`size` pixels, `views` views) to `dir/scene`.
 pub fn synth_scene(dir: &Path, format: &str, size: u32, views: u32) -> std::path::PathBuf {
     let scene = dir.join("scene");
