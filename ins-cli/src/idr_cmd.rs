@@ -68,7 +68,8 @@ pub struct RenderIdr {
     /// a side unseen, as DTU's do), turntable or spiral.
     #[arg(long, conflicts_with = "view")]
     path: Option<PathKind>,
-    /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it).
+    /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it, held
+    /// to the range the viewer allows: a partial capture's arc).
     #[arg(long, conflicts_with_all = ["view", "path"])]
     orbit: Option<String>,
     /// Frames of the path.

@@ -82,7 +82,8 @@ pub struct Cameras {
     /// arc (over the side a partial capture saw). Default: the scene's.
     #[arg(long)]
     path: Option<PathKind>,
-    /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it).
+    /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it, held
+    /// to the range the viewer allows: a forward-facing scene's spiral, a partial capture's arc).
     #[arg(long)]
     orbit: Option<String>,
 }

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use super::camera::{Camera, pose_from_back_up, pose_look_at};
 use super::data::{Scene, Split};
 use super::geometry::{Mat3, Vec3};
-use super::paths::{plane_basis, scene_orbit, scene_up, spiral_frame};
+use super::paths::{capture_arc, plane_basis, scene_orbit, scene_up, spiral_frame};
 
 /// A viewer's camera pose.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -29,6 +29,22 @@ pub struct ViewerPose {
 pub const FORWARD_RANGE: f32 = 30.0;
 /// Distances a viewer may choose (multiples of the training cameras' mean distance).
 pub const DISTANCE_RANGE: (f32, f32) = (0.2, 5.0);
+/// Degrees a viewer may turn past either end of a partial capture's arc.
+pub const ARC_MARGIN: f32 = 10.0;
+
+/// `azimuth` (degrees, any turn) held within `(low, high)` (degrees, `low ≤ high < low + 360`):
+/// the same direction written from `low` on where it lies inside, else the nearer end.
+pub fn clamp_to_arc(azimuth: f32, (low, high): (f32, f32)) -> f32 {
+    let past = (azimuth - low).rem_euclid(360.0);
+    let width = high - low;
+    if past <= width {
+        low + past
+    } else if past - width < 360.0 - past {
+        high
+    } else {
+        low
+    }
+}
 
 /// A scene's viewpoints.
 #[derive(Clone, Debug)]
@@ -48,6 +64,9 @@ pub enum Viewpoints {
         home: ViewerPose,
         /// Horizontal field of view of the first training camera (radians).
         fov_x: f32,
+        /// For a capture that saw one side (DTU), the azimuths its cameras cover, widened by
+        /// [`ARC_MARGIN`]: `(low, high)` degrees. Beyond, no photo constrains the field.
+        arc: Option<(f32, f32)>,
     },
     /// Within a forward-facing scene's spiral.
     Forward {
@@ -89,6 +108,11 @@ impl Viewpoints {
         let (o, _) = scene_orbit(scene)?;
         let (center, up, radius) = (o.center, o.up, o.radius);
         let plane = plane_basis(up);
+        let arc = capture_arc(scene).and_then(|(start, span)| {
+            let (start, span) = (start.to_degrees(), span.to_degrees());
+            (span + 2.0 * ARC_MARGIN < 360.0)
+                .then_some((start - ARC_MARGIN, start + span + ARC_MARGIN))
+        });
         Some(Self::Orbit {
             center,
             up,
@@ -101,7 +125,16 @@ impl Viewpoints {
                 pan: [0.0, 0.0],
             },
             fov_x: fov_x(first),
+            arc,
         })
+    }
+
+    /// The azimuths a viewer may take, `(low, high)` degrees, where the capture saw one side.
+    pub fn azimuth_range(&self) -> Option<(f32, f32)> {
+        match self {
+            Self::Orbit { arc, .. } => *arc,
+            Self::Forward { .. } => None,
+        }
     }
 
     /// The pose a viewer opens at.
@@ -123,7 +156,8 @@ impl Viewpoints {
     }
 
     /// `pose` held within the scene's range (elevations short of the poles, distances within
-    /// [`DISTANCE_RANGE`], forward-facing offsets within the spiral).
+    /// [`DISTANCE_RANGE`], a partial capture's azimuths within its arc, forward-facing offsets
+    /// within the spiral).
     pub fn clamp(&self, pose: ViewerPose) -> ViewerPose {
         let finite = |v: f32, d: f32| if v.is_finite() { v } else { d };
         let home = self.home();
@@ -134,7 +168,12 @@ impl Viewpoints {
             pan: pose.pan.map(|v| finite(v, 0.0).clamp(-1.0, 1.0)),
         };
         match self {
-            Self::Orbit { .. } => p.elevation = p.elevation.clamp(-89.0, 89.0),
+            Self::Orbit { arc, .. } => {
+                p.elevation = p.elevation.clamp(-89.0, 89.0);
+                if let Some(arc) = arc {
+                    p.azimuth = clamp_to_arc(p.azimuth, *arc);
+                }
+            }
             Self::Forward { .. } => {
                 p.azimuth = p.azimuth.clamp(-FORWARD_RANGE, FORWARD_RANGE);
                 p.elevation = p.elevation.clamp(-FORWARD_RANGE, FORWARD_RANGE);
@@ -194,7 +233,7 @@ impl Viewpoints {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::synthetic::{SynthOptions, write_blender, write_llff};
+    use crate::data::synthetic::{SynthOptions, write_blender, write_dtu, write_llff};
     use crate::data::{LoadOptions, Scene};
     use crate::paths::turntable_for_scene;
 
@@ -309,5 +348,92 @@ mod tests {
         let reach = (radii[0].powi(2) + radii[1].powi(2) + radii[2].powi(2)).sqrt();
         assert!((far.origin() - *center).length() <= reach * 1.001 + 1e-6);
         assert!((vp.camera(vp.home(), 16, 16).origin() - *center).length() < 1e-5);
+    }
+
+    #[test]
+    fn an_azimuth_is_held_to_an_arc_by_its_nearer_end() {
+        let arc = (-70.0, 100.0);
+        assert_eq!(clamp_to_arc(0.0, arc), 0.0);
+        // The same directions written another turn round.
+        assert_eq!(clamp_to_arc(360.0 + 30.0, arc), 30.0);
+        assert_eq!(clamp_to_arc(-400.0, arc), -40.0);
+        // Outside: the nearer end (the gap from 100 round to 290 = -70 is split at 195).
+        assert_eq!(clamp_to_arc(150.0, arc), 100.0);
+        assert_eq!(clamp_to_arc(250.0, arc), -70.0);
+        assert_eq!(clamp_to_arc(-100.0, arc), -70.0);
+    }
+
+    #[test]
+    fn a_capture_that_saw_one_side_is_orbited_over_that_side_only() {
+        let (_d, scene) = load(write_dtu);
+        let vp = Viewpoints::for_scene(&scene).unwrap();
+        let (low, high) = vp.azimuth_range().expect("a partial capture has an arc");
+        // The arc the training cameras cover (their 150° of the writer's azimuths, seen about
+        // the orbit's own axis), 10° more each side.
+        let (_, span) = capture_arc(&scene).unwrap();
+        assert!(span.to_degrees() < 150.0, "{}", span.to_degrees());
+        assert!(
+            (high - low - span.to_degrees() - 2.0 * ARC_MARGIN).abs() < 1e-3,
+            "{low} {high}"
+        );
+        let home = vp.home();
+        assert_eq!(
+            vp.clamp(home).azimuth,
+            clamp_to_arc(home.azimuth, (low, high))
+        );
+        assert!((low..=high).contains(&vp.clamp(home).azimuth));
+        // The training cameras' azimuths about the orbit's centre, as the viewer measures them.
+        let Viewpoints::Orbit {
+            center, up, plane, ..
+        } = &vp
+        else {
+            unreachable!()
+        };
+        let azimuth = |eye: Vec3| {
+            let v = eye - *center;
+            v.dot(plane.1).atan2(v.dot(plane.0)).to_degrees()
+        };
+        let seen: Vec<f32> = scene
+            .split(Split::Train)
+            .iter()
+            .map(|&i| azimuth(scene.views[i].camera.origin()))
+            .collect();
+        let nearest_seen = |a: f32| {
+            seen.iter()
+                .map(|s| {
+                    let d = (a - s).rem_euclid(360.0);
+                    d.min(360.0 - d)
+                })
+                .fold(f32::INFINITY, f32::min)
+        };
+        // Asked for every direction round the object, the viewer never looks from further than
+        // the margin beyond a photo.
+        for k in 0..36 {
+            let pose = ViewerPose {
+                azimuth: k as f32 * 10.0,
+                ..home
+            };
+            let eye = vp.camera(pose, 16, 16).origin();
+            let off = nearest_seen(azimuth(eye));
+            assert!(
+                off <= ARC_MARGIN + 0.5,
+                "azimuth {}: {off}° from a photo",
+                k * 10
+            );
+            // Height above the centre as asked: only the azimuth was held.
+            let el = (eye - *center)
+                .normalize_or_zero()
+                .dot(*up)
+                .asin()
+                .to_degrees();
+            assert!(
+                (el - home.elevation).abs() < 0.1,
+                "{el} vs {}",
+                home.elevation
+            );
+        }
+        // A scene photographed all round has no arc.
+        let (_d, scene) = load(write_blender);
+        assert_eq!(Viewpoints::for_scene(&scene).unwrap().azimuth_range(), None);
     }
 }

@@ -131,6 +131,7 @@ impl Source {
                     "styles": style_names(&run.style().styles),
                     "home": viewpoints.home(),
                     "forward_facing": viewpoints.forward_facing(),
+                    "azimuth_range": viewpoints.azimuth_range(),
                     "aspect": t.width as f32 / t.height.max(1) as f32,
                     "modes": ["color", "depth", "normals", "silhouette"],
                 })
