@@ -185,11 +185,25 @@ fn grid_nerf_pretrains_then_stylizes_keeping_its_depth() {
         to_second.push(d(&img, &paintings[1]));
     }
     eprintln!("along the mix: to the stripes {to_first:?}, to the blotches {to_second:?}");
-    // Only the ends are asserted: between them this NeRF's mix is not reliably monotone (in one
-    // of three runs the render at t = 0.5 was farther from both paintings than either end);
-    // the IDR test holds the whole mix. Open in issue 27.
-    ins_tests::assert_moved(&to_first, true, "the distance to the stripes");
-    ins_tests::assert_moved(&to_second, false, "the distance to the blotches");
+    // Asserted on the render's preference, its distance to the stripes less its distance to
+    // the blotches, which rises as it leaves the one for the other. Either distance alone also
+    // falls as a render gets painterly at all: in one run (a fresh clone, both tests of this
+    // file at once) the blotch end was barely farther from the stripes than the stripe end
+    // (0.4949 against 0.4870) while it neared the blotches by 0.112, a preference moved by
+    // 0.120; here 0.35 and 0.26. A model that ignores its code moves 0. Only the ends are
+    // asserted: between them this NeRF's mix is not reliably monotone (in one of three runs
+    // the render at t = 0.5 was farther from both paintings than either end); the IDR test
+    // holds the whole mix.
+    let preference: Vec<f64> = to_first
+        .iter()
+        .zip(&to_second)
+        .map(|(a, b)| a - b)
+        .collect();
+    ins_tests::assert_moved(
+        &preference,
+        true,
+        "the distance to the stripes less the distance to the blotches",
+    );
 
     // Deferred back-propagation through the trainer: the patch's 576 rays back-propagated in
     // chunks of 200, the density stylized too (so the geometry term goes through the chunks),
