@@ -69,7 +69,8 @@ pub struct RenderIdr {
     #[arg(long, conflicts_with = "view")]
     path: Option<PathKind>,
     /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it, held
-    /// to the range the viewer allows: a partial capture's arc).
+    /// to the range the viewer allows: the photos' elevations and a partial capture's arc, 10°
+    /// beyond).
     #[arg(long, conflicts_with_all = ["view", "path"])]
     orbit: Option<String>,
     /// Frames of the path.

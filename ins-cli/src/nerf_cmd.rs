@@ -83,7 +83,8 @@ pub struct Cameras {
     #[arg(long)]
     path: Option<PathKind>,
     /// One view at a viewer pose AZ,EL[,DIST[,PANX,PANY]] (as `ins-cli view` shows it, held
-    /// to the range the viewer allows: a forward-facing scene's spiral, a partial capture's arc).
+    /// to the range the viewer allows: a forward-facing scene's spiral; elsewhere the photos'
+    /// elevations and a partial capture's arc, 10° beyond).
     #[arg(long)]
     orbit: Option<String>,
 }

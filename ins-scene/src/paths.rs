@@ -101,6 +101,22 @@ fn camera_azimuths(scene: &Scene, orbit: &SceneOrbit) -> Vec<f32> {
         .collect()
 }
 
+/// The lowest and highest elevation (radians above the plane through `orbit.center`
+/// perpendicular to `orbit.up`) of `scene`'s training cameras; `None` without any.
+pub fn camera_elevations(scene: &Scene, orbit: &SceneOrbit) -> Option<(f32, f32)> {
+    scene
+        .split(crate::data::Split::Train)
+        .iter()
+        .map(|&i| {
+            let v = (scene.views[i].camera.origin() - orbit.center).normalize_or_zero();
+            v.dot(orbit.up).clamp(-1.0, 1.0).asin()
+        })
+        .fold(None, |range, e| match range {
+            None => Some((e, e)),
+            Some((low, high)) => Some((f32::min(low, e), f32::max(high, e))),
+        })
+}
+
 /// The arc of a scene's orbit its training cameras cover, where they leave a gap of at least
 /// [`ARC_MIN_GAP`]: `(start, span)` radians.
 pub fn capture_arc(scene: &Scene) -> Option<(f32, f32)> {

@@ -8,7 +8,9 @@ use serde::{Deserialize, Serialize};
 use super::camera::{Camera, pose_from_back_up, pose_look_at};
 use super::data::{Scene, Split};
 use super::geometry::{Mat3, Vec3};
-use super::paths::{capture_arc, plane_basis, scene_orbit, scene_up, spiral_frame};
+use super::paths::{
+    camera_elevations, capture_arc, plane_basis, scene_orbit, scene_up, spiral_frame,
+};
 
 /// A viewer's camera pose.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -29,8 +31,11 @@ pub struct ViewerPose {
 pub const FORWARD_RANGE: f32 = 30.0;
 /// Distances a viewer may choose (multiples of the training cameras' mean distance).
 pub const DISTANCE_RANGE: (f32, f32) = (0.2, 5.0);
-/// Degrees a viewer may turn past either end of a partial capture's arc.
+/// Degrees a viewer may turn past the photos: beyond either end of a partial capture's arc, and
+/// above the highest or below the lowest training camera.
 pub const ARC_MARGIN: f32 = 10.0;
+/// Elevations no viewer passes (degrees): at the poles the orbit's up direction is undefined.
+pub const POLE: f32 = 89.0;
 
 /// `azimuth` (degrees, any turn) held within `(low, high)` (degrees, `low ≤ high < low + 360`):
 /// the same direction written from `low` on where it lies inside, else the nearer end.
@@ -67,6 +72,10 @@ pub enum Viewpoints {
         /// For a capture that saw one side (DTU), the azimuths its cameras cover, widened by
         /// [`ARC_MARGIN`]: `(low, high)` degrees. Beyond, no photo constrains the field.
         arc: Option<(f32, f32)>,
+        /// The training cameras' lowest and highest elevations, widened by [`ARC_MARGIN`] and
+        /// held short of the poles: `(low, high)` degrees. Below a turntable's lowest photo
+        /// lies what no photo saw (under lego's baseplate).
+        elevations: (f32, f32),
     },
     /// Within a forward-facing scene's spiral.
     Forward {
@@ -113,6 +122,11 @@ impl Viewpoints {
             (span + 2.0 * ARC_MARGIN < 360.0)
                 .then_some((start - ARC_MARGIN, start + span + ARC_MARGIN))
         });
+        let (low, high) = camera_elevations(scene, &o)?;
+        let elevations = (
+            (low.to_degrees() - ARC_MARGIN).clamp(-POLE, POLE),
+            (high.to_degrees() + ARC_MARGIN).clamp(-POLE, POLE),
+        );
         Some(Self::Orbit {
             center,
             up,
@@ -126,6 +140,7 @@ impl Viewpoints {
             },
             fov_x: fov_x(first),
             arc,
+            elevations,
         })
     }
 
@@ -133,6 +148,15 @@ impl Viewpoints {
     pub fn azimuth_range(&self) -> Option<(f32, f32)> {
         match self {
             Self::Orbit { arc, .. } => *arc,
+            Self::Forward { .. } => None,
+        }
+    }
+
+    /// The elevations a viewer may take around a 360° scene or partial capture, `(low, high)`
+    /// degrees.
+    pub fn elevation_range(&self) -> Option<(f32, f32)> {
+        match self {
+            Self::Orbit { elevations, .. } => Some(*elevations),
             Self::Forward { .. } => None,
         }
     }
@@ -155,7 +179,7 @@ impl Viewpoints {
         matches!(self, Self::Forward { .. })
     }
 
-    /// `pose` held within the scene's range (elevations short of the poles, distances within
+    /// `pose` held within the scene's range (elevations within the photos', distances within
     /// [`DISTANCE_RANGE`], a partial capture's azimuths within its arc, forward-facing offsets
     /// within the spiral).
     pub fn clamp(&self, pose: ViewerPose) -> ViewerPose {
@@ -168,8 +192,10 @@ impl Viewpoints {
             pan: pose.pan.map(|v| finite(v, 0.0).clamp(-1.0, 1.0)),
         };
         match self {
-            Self::Orbit { arc, .. } => {
-                p.elevation = p.elevation.clamp(-89.0, 89.0);
+            Self::Orbit {
+                arc, elevations, ..
+            } => {
+                p.elevation = p.elevation.clamp(elevations.0, elevations.1);
                 if let Some(arc) = arc {
                     p.azimuth = clamp_to_arc(p.azimuth, *arc);
                 }
@@ -323,7 +349,12 @@ mod tests {
         });
         assert_eq!(
             (p.azimuth, p.elevation, p.distance, p.pan[0]),
-            (home.azimuth, 89.0, DISTANCE_RANGE.1, 1.0)
+            (
+                home.azimuth,
+                vp.elevation_range().unwrap().1,
+                DISTANCE_RANGE.1,
+                1.0
+            )
         );
     }
 
@@ -435,5 +466,64 @@ mod tests {
         // A scene photographed all round has no arc.
         let (_d, scene) = load(write_blender);
         assert_eq!(Viewpoints::for_scene(&scene).unwrap().azimuth_range(), None);
+    }
+
+    #[test]
+    fn a_turntable_is_not_looked_at_from_below_its_lowest_photo() {
+        let (_d, scene) = load(write_blender);
+        let vp = Viewpoints::for_scene(&scene).unwrap();
+        let Viewpoints::Orbit { center, up, .. } = &vp else {
+            unreachable!()
+        };
+        let elevation = |eye: Vec3| {
+            (eye - *center)
+                .normalize_or_zero()
+                .dot(*up)
+                .asin()
+                .to_degrees()
+        };
+        let seen: Vec<f32> = scene
+            .split(Split::Train)
+            .iter()
+            .map(|&i| elevation(scene.views[i].camera.origin()))
+            .collect();
+        let lowest = seen.iter().copied().fold(f32::INFINITY, f32::min);
+        let highest = seen.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        // The writer's cameras sit 10° to 60° above the table: nothing saw it from below.
+        assert!(lowest > 5.0 && highest < 65.0, "{lowest} {highest}");
+        let (low, high) = vp.elevation_range().unwrap();
+        assert!(
+            (low - (lowest - ARC_MARGIN)).abs() < 1e-3,
+            "{low} vs {lowest}"
+        );
+        assert!(
+            (high - (highest + ARC_MARGIN)).abs() < 1e-3,
+            "{high} vs {highest}"
+        );
+        let home = vp.home();
+        for k in -9..=9 {
+            let asked = k as f32 * 10.0;
+            let eye = vp
+                .camera(
+                    ViewerPose {
+                        elevation: asked,
+                        ..home
+                    },
+                    16,
+                    16,
+                )
+                .origin();
+            let el = elevation(eye);
+            assert!(
+                el >= lowest - ARC_MARGIN - 0.1 && el <= highest + ARC_MARGIN + 0.1,
+                "asked {asked}°, looked from {el}° (photos {lowest}° to {highest}°)"
+            );
+            // Within the range, the elevation asked.
+            if (low..=high).contains(&asked) {
+                assert!((el - asked).abs() < 0.1, "asked {asked}°, got {el}°");
+            }
+        }
+        // The home view keeps its elevation.
+        assert_eq!(vp.clamp(home).elevation, home.elevation);
     }
 }

@@ -132,6 +132,7 @@ impl Source {
                     "home": viewpoints.home(),
                     "forward_facing": viewpoints.forward_facing(),
                     "azimuth_range": viewpoints.azimuth_range(),
+                    "elevation_range": viewpoints.elevation_range(),
                     "aspect": t.width as f32 / t.height.max(1) as f32,
                     "modes": ["color", "depth", "normals", "silhouette"],
                 })
