@@ -99,3 +99,66 @@ pub(crate) fn filled(n: usize, fill: impl Fn(usize, &mut [MaybeUninit<f32>]) + S
 pub(crate) fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
     matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_))
 }
+
+/// The widest vector instructions this CPU offers the element-wise kernels (sine, softplus,
+/// Adam).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lanes {
+    /// AVX-512F: 16 f32 lanes.
+    Avx512,
+    /// AVX2 with FMA (most laptops and desktops, AMD before Zen 4): 8 lanes.
+    Avx2,
+    /// The x86-64 baseline (SSE2, 4 lanes), or another architecture.
+    Baseline,
+}
+
+impl Lanes {
+    /// This CPU's (the standard library caches the detection).
+    pub fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                return Self::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                return Self::Avx2;
+            }
+        }
+        Self::Baseline
+    }
+}
+
+/// `fn name(args) = body;` defines `name`, which runs `body` (an `#[inline(always)]` loop) as
+/// compiled for the widest vector instructions of [`Lanes::detect`]. A build for the baseline
+/// x86-64 CPU runs every loop 4 lanes wide; each copy here is vectorized 16 or 8 wide. The
+/// arithmetic is the same in each (Rust never fuses a multiply and an add on its own), so the
+/// results are too.
+macro_rules! vectorized {
+    ($(#[$m:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) = $body:path;) => {
+        $(#[$m])*
+        $vis fn $name($($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f")]
+                fn avx512($($arg: $ty),*) {
+                    $body($($arg),*)
+                }
+                #[target_feature(enable = "avx2,fma")]
+                fn avx2($($arg: $ty),*) {
+                    $body($($arg),*)
+                }
+                match $crate::flex_kernels::Lanes::detect() {
+                    // SAFETY: the CPU has AVX-512F (checked at run time).
+                    $crate::flex_kernels::Lanes::Avx512 => return unsafe { avx512($($arg),*) },
+                    // SAFETY: the CPU has AVX2 and FMA (checked at run time).
+                    $crate::flex_kernels::Lanes::Avx2 => return unsafe { avx2($($arg),*) },
+                    $crate::flex_kernels::Lanes::Baseline => {}
+                }
+            }
+            $body($($arg),*)
+        }
+    };
+}
+pub(crate) use vectorized;

@@ -7,8 +7,9 @@
 //! The computation: odd-shaped matrix products, and 3×3 / 1×1 / strided convolutions with the
 //! gradients of both their input and their weight, on flex, through Burn's conv2d and through
 //! `ins-conv`'s op (f32 engine, with and without its fused ReLU: its BF16 engines are never
-//! picked on these CPUs); the SIREN's `sin(ω·z)` op and the SDF networks' softplus and slope ops,
-//! whose AVX-512 paths the emulated CPUs replace by plain ones; and the Gram-matrix op.
+//! picked on these CPUs); the SIREN's `sin(ω·z)` op, the SDF networks' softplus and slope ops and
+//! Adam's update, whose AVX-512 loops the emulated CPUs run 8 lanes wide (Haswell) or 4 (Nehalem),
+//! bit for bit the same; and the Gram-matrix op.
 //!
 //! A test binary without the libtest harness (`harness = false`): run with the environment
 //! variable below, it is the child that computes and writes its numbers.
@@ -25,6 +26,7 @@ use ins_conv::op::ConvParams;
 use ins_core::loss::gram_op::gram_flex;
 use ins_core::modules::sine_op::scaled_sin;
 use ins_core::modules::softplus_op::{softplus, softplus_slope};
+use ins_core::train::fused_adam::kernel::{Step, update as adam_update};
 use ins_tests::{max_rel_diff, values};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -40,6 +42,9 @@ const CPUS: &[(&str, &[&str], &[&str])] = &[
 
 /// Kernels agree to rounding: different kernels sum in different orders.
 const TOLERANCE: f32 = 1e-4;
+/// The element-wise kernels (sine, softplus, Adam), compiled once per vector width from one
+/// loop, agree exactly: the same arithmetic in the same order, whatever the width.
+const ELEMENT_WISE: &[&str] = &["sine", "softplus", "adam"];
 
 type Results = BTreeMap<String, Vec<f32>>;
 
@@ -207,6 +212,31 @@ fn compute() -> Results {
         "softplus_grad".into(),
         values(ut.grad(&grads).expect("softplus gradient")),
     );
+    // One Adam step on 4099 parameters, in place, as the optimizer runs it.
+    let step = Step {
+        lr: 1e-3,
+        beta_1: 0.9,
+        beta_2: 0.999,
+        scale: 0.3,
+        epsilon: 1e-8,
+    };
+    let g = random(&mut rng, 4099);
+    let mut param = random(&mut rng, 4099);
+    let mut m = random(&mut rng, 4099);
+    let mut v: Vec<f32> = random(&mut rng, 4099).iter().map(|x| x * x).collect();
+    let (mut naive, mut naive_m, mut naive_v) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..4099 {
+        let mi = 0.9 * m[i] + 0.1 * g[i];
+        let vi = 0.999 * v[i] + 0.001 * g[i] * g[i];
+        naive.push(param[i] - 1e-3 * 0.3 * mi / (vi.sqrt() + 1e-8));
+        naive_m.push(mi);
+        naive_v.push(vi);
+    }
+    adam_update(step, &g, &mut param, &mut m, &mut v);
+    out.insert("adam".into(), param);
+    out.insert("adam_naive".into(), naive);
+    out.insert("adam_moments".into(), [m, v].concat());
+    out.insert("adam_moments_naive".into(), [naive_m, naive_v].concat());
     // The Gram matrix of a [1, 19, 130] feature map and its gradient.
     let (c, p) = (19, 130);
     let f = random(&mut rng, c * p);
@@ -322,6 +352,17 @@ fn parent() {
         );
         let mut worst = 0.0f32;
         for (name, v) in &r {
+            if ELEMENT_WISE.iter().any(|k| name.starts_with(k)) && !name.ends_with("_naive") {
+                let differ = v
+                    .iter()
+                    .zip(&native[name])
+                    .filter(|(a, b)| a.to_bits() != b.to_bits());
+                assert_eq!(
+                    differ.count(),
+                    0,
+                    "{cpu}: {name} is not bit-identical to the native run"
+                );
+            }
             let d = max_rel_diff(v, &native[name], 1e-3);
             assert!(
                 d < TOLERANCE,

@@ -69,9 +69,9 @@ pub mod kernel {
 
     #[inline(always)]
     fn forward_loop(z: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
-        out.iter_mut().zip(z).for_each(|(o, &z)| {
+        for (o, &z) in out.iter_mut().zip(z) {
             o.write(sin(omega * z));
-        });
+        }
     }
 
     #[inline(always)]
@@ -81,43 +81,23 @@ pub mod kernel {
         }
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn forward_avx512(z: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
-        forward_loop(z, omega, out)
+    crate::flex_kernels::vectorized! {
+        /// `out = sin(ω·z)`.
+        pub fn forward(
+            z: &[f32],
+            omega: f32,
+            out: &mut [MaybeUninit<f32>],
+        ) = forward_loop;
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn backward_avx512(z: &[f32], g: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
-        backward_loop(z, g, omega, out)
-    }
-
-    fn avx512() -> bool {
-        #[cfg(target_arch = "x86_64")]
-        return std::arch::is_x86_feature_detected!("avx512f");
-        #[cfg(not(target_arch = "x86_64"))]
-        false
-    }
-
-    /// `out = sin(ω·z)`, 16 lanes at a time where the CPU has AVX-512.
-    pub fn forward(z: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
-        #[cfg(target_arch = "x86_64")]
-        if avx512() {
-            // SAFETY: AVX-512F is present (checked at run time).
-            return unsafe { forward_avx512(z, omega, out) };
-        }
-        forward_loop(z, omega, out)
-    }
-
-    /// `out = ω·cos(ω·z)·g`.
-    pub fn backward(z: &[f32], g: &[f32], omega: f32, out: &mut [MaybeUninit<f32>]) {
-        #[cfg(target_arch = "x86_64")]
-        if avx512() {
-            // SAFETY: as above.
-            return unsafe { backward_avx512(z, g, omega, out) };
-        }
-        backward_loop(z, g, omega, out)
+    crate::flex_kernels::vectorized! {
+        /// `out = ω·cos(ω·z)·g`.
+        pub fn backward(
+            z: &[f32],
+            g: &[f32],
+            omega: f32,
+            out: &mut [MaybeUninit<f32>],
+        ) = backward_loop;
     }
 }
 

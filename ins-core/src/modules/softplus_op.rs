@@ -113,7 +113,7 @@ pub mod kernel {
     }
 
     /// One map over the slices. Indexed loops, not iterator adapters: a closure handed to
-    /// `for_each` was compiled as a function of its own, outside the AVX-512 caller, and ran
+    /// `for_each` was compiled as a function of its own, outside the vectorized caller, and ran
     /// one lane at a time (a fifth of an IDR step).
     #[inline(always)]
     fn map_loop<const MAP: u8>(
@@ -153,20 +153,15 @@ pub mod kernel {
         }
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn run_avx512(map: Map, x: &[f32], g: Option<&[f32]>, beta: f32, out: &mut [MaybeUninit<f32>]) {
-        run_loop(map, x, g, beta, out)
-    }
-
-    /// `out = map(x)` (times `g` where given), 16 lanes at a time where the CPU has AVX-512.
-    pub fn run(map: Map, x: &[f32], g: Option<&[f32]>, beta: f32, out: &mut [MaybeUninit<f32>]) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: AVX-512F is present (checked at run time).
-            return unsafe { run_avx512(map, x, g, beta, out) };
-        }
-        run_loop(map, x, g, beta, out)
+    crate::flex_kernels::vectorized! {
+        /// `out = map(x)` (times `g` where given).
+        pub fn run(
+            map: Map,
+            x: &[f32],
+            g: Option<&[f32]>,
+            beta: f32,
+            out: &mut [MaybeUninit<f32>],
+        ) = run_loop;
     }
 }
 

@@ -95,20 +95,15 @@ pub mod kernel {
         }
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn update_avx512(s: Step, g: &[f32], param: &mut [f32], m: &mut [f32], v: &mut [f32]) {
-        update_loop(s, g, param, m, v)
-    }
-
-    /// The update, vectorized with AVX-512 where the CPU has it.
-    pub fn update(s: Step, g: &[f32], param: &mut [f32], m: &mut [f32], v: &mut [f32]) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: AVX-512F is present (checked at run time).
-            return unsafe { update_avx512(s, g, param, m, v) };
-        }
-        update_loop(s, g, param, m, v)
+    crate::flex_kernels::vectorized! {
+        /// The update.
+        pub fn update(
+            s: Step,
+            g: &[f32],
+            param: &mut [f32],
+            m: &mut [f32],
+            v: &mut [f32],
+        ) = update_loop;
     }
 }
 
