@@ -101,16 +101,18 @@ fn camera_azimuths(scene: &Scene, orbit: &SceneOrbit) -> Vec<f32> {
         .collect()
 }
 
+/// The elevation (radians) of the direction `v` above the plane perpendicular to `up`.
+fn elevation(v: Vec3, up: Vec3) -> f32 {
+    v.normalize_or_zero().dot(up).clamp(-1.0, 1.0).asin()
+}
+
 /// The lowest and highest elevation (radians above the plane through `orbit.center`
 /// perpendicular to `orbit.up`) of `scene`'s training cameras; `None` without any.
 pub fn camera_elevations(scene: &Scene, orbit: &SceneOrbit) -> Option<(f32, f32)> {
     scene
         .split(crate::data::Split::Train)
         .iter()
-        .map(|&i| {
-            let v = (scene.views[i].camera.origin() - orbit.center).normalize_or_zero();
-            v.dot(orbit.up).clamp(-1.0, 1.0).asin()
-        })
+        .map(|&i| elevation(scene.views[i].camera.origin() - orbit.center, orbit.up))
         .fold(None, |range, e| match range {
             None => Some((e, e)),
             Some((low, high)) => Some((f32::min(low, e), f32::max(high, e))),
@@ -179,7 +181,7 @@ pub fn scene_orbit(scene: &Scene) -> Option<(SceneOrbit, &Camera)> {
     for c in &cams {
         let v = c.origin() - center;
         radius += v.length();
-        elevation += v.normalize_or_zero().dot(up).clamp(-1.0, 1.0).asin();
+        elevation += self::elevation(v, up);
     }
     radius /= cams.len() as f32;
     elevation /= cams.len() as f32;
