@@ -153,6 +153,12 @@ pub fn train_siren(
     ins_models::run::train::<ins_models::siren::Siren>(cfg, Some(vgg), device, opts)
 }
 
+/// How long a wgpu test may take before it counts as a hang. Mesa's lavapipe compiles each
+/// kernel on the CPU the first time (minutes: three IDR steps took 486 s alone with empty
+/// caches on an AVX2-only EPYC), and `scripts/test.sh` runs two test programs at once, which
+/// stretched the f16 VGG test's program from 435 s to 781 s there.
+pub const WGPU_LIMIT_S: u64 = 1800;
+
 /// Runs `f` on its own thread and returns its result, or fails the test after `seconds`
 /// (naming `what`) instead of hanging it: a wgpu driver that deadlocks must fail a test, not
 /// stall CI. A thread that never returns is left behind; the test binary exits without it.

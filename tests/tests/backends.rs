@@ -109,9 +109,11 @@ fn flex_ndarray_and_wgpu_agree_on_loss_and_flex_ndarray_on_gradients() {
     }
     for (backend, gradients) in [(BackendChoice::Ndarray, true), (BackendChoice::Wgpu, true)] {
         let init = init.clone();
-        let (l, g) = ins_tests::within(900, &format!("the {backend} loss"), move || {
-            loss_and_gradients(backend, &init, gradients)
-        });
+        let (l, g) = ins_tests::within(
+            ins_tests::WGPU_LIMIT_S,
+            &format!("the {backend} loss"),
+            move || loss_and_gradients(backend, &init, gradients),
+        );
         let rel = (l - l_flex).abs() / l_flex;
         assert!(rel < 1e-4, "{backend}: loss {l} vs flex {l_flex}");
         if gradients {

@@ -110,7 +110,7 @@ fn kernel_op_equals_the_reference_in_value_and_gradient_on_every_backend() {
     ];
     for (name, backend, kernel) in cases {
         // wgpu (lavapipe here) compiles its kernels on first use: a limit that fails the test.
-        let r = ins_tests::within(600, name, move || run(backend, kernel));
+        let r = ins_tests::within(ins_tests::WGPU_LIMIT_S, name, move || run(backend, kernel));
         assert_close(&format!("{name} encoding"), &r.encoding, &truth.encoding);
         assert_close(
             &format!("{name} table gradient"),

@@ -206,34 +206,42 @@ fn rel_l2(a: &[f32], b: &[f32]) -> f32 {
 #[test]
 fn f16_features_on_wgpu_stay_close_to_f32() {
     use ins_conv::Precision;
-    let (features, gradients, half) = ins_tests::within(900, "VGG on wgpu in f16 and f32", || {
-        let device = ins_core::backend::BackendChoice::Wgpu.device().autodiff();
-        let half = Precision::F16.effective_on(&device) == Precision::F16;
-        let f32_vgg = real_vgg(&device);
-        let f16_vgg = f32_vgg.clone().with_precision(Precision::F16);
-        // A 64² crop keeps lavapipe's time small.
-        let x =
-            npy_tensor4(&fixture("vgg/real_input.npy"), &device).slice([0..1, 0..3, 0..64, 0..64]);
-        // A style loss of the size stylization uses: Gram distances to a fixed target.
-        let run = |vgg: &Vgg| {
-            let (layers, _, grad) = layers_grams_and_gradient(vgg, &x, |g| {
-                (g.clone() - g.detach().mul_scalar(0.5))
-                    .powf_scalar(2.0)
-                    .mean()
-            });
-            (layers, grad)
-        };
-        let (fa, da) = run(&f32_vgg);
-        let (fb, db) = run(&f16_vgg);
-        (
-            fa.iter()
-                .zip(&fb)
-                .map(|(a, b)| (a.clone(), b.clone()))
-                .collect::<Vec<_>>(),
-            (da, db),
-            half,
-        )
-    });
+    let (features, gradients, half) = ins_tests::within(
+        ins_tests::WGPU_LIMIT_S,
+        "VGG on wgpu in f16 and f32",
+        || {
+            let device = ins_core::backend::BackendChoice::Wgpu.device().autodiff();
+            let half = Precision::F16.effective_on(&device) == Precision::F16;
+            let f32_vgg = real_vgg(&device);
+            let f16_vgg = f32_vgg.clone().with_precision(Precision::F16);
+            // A 64² crop keeps lavapipe's time small.
+            let x = npy_tensor4(&fixture("vgg/real_input.npy"), &device).slice([
+                0..1,
+                0..3,
+                0..64,
+                0..64,
+            ]);
+            // A style loss of the size stylization uses: Gram distances to a fixed target.
+            let run = |vgg: &Vgg| {
+                let (layers, _, grad) = layers_grams_and_gradient(vgg, &x, |g| {
+                    (g.clone() - g.detach().mul_scalar(0.5))
+                        .powf_scalar(2.0)
+                        .mean()
+                });
+                (layers, grad)
+            };
+            let (fa, da) = run(&f32_vgg);
+            let (fb, db) = run(&f16_vgg);
+            (
+                fa.iter()
+                    .zip(&fb)
+                    .map(|(a, b)| (a.clone(), b.clone()))
+                    .collect::<Vec<_>>(),
+                (da, db),
+                half,
+            )
+        },
+    );
     if !half {
         eprintln!("this adapter has no f16 shaders: f16 falls back to f32");
         for (a, b) in &features {
