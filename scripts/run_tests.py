@@ -44,8 +44,8 @@ SLOWEST_FIRST = [
 RESULT = re.compile(r"test result: \w+\. (\d+) passed; (\d+) failed; (\d+) ignored")
 
 
-def build(root):
-    """Builds every test program; returns the jobs (name, label, argv, folder).
+def build(root, args):
+    """Builds every test program; returns the jobs (name, label, argv with `args`, folder).
 
     `--timings` leaves cargo's build profile in target/cargo-timings/: where a slow CI build
     went, per crate."""
@@ -68,7 +68,7 @@ def build(root):
         kind = target["kind"][0]
         package = os.path.dirname(msg["manifest_path"])
         label = f"{os.path.basename(package)} {kind} {target['name']}"
-        jobs.append((target["name"], label, [msg["executable"]], package))
+        jobs.append((target["name"], label, [msg["executable"], *args], package))
     if proc.wait() != 0:
         sys.exit("the tests did not build (cargo's messages are above)")
     return jobs
@@ -92,17 +92,16 @@ def main():
     if args[:1] == ["--"]:
         args = args[1:]
     slots = int(os.environ.get("INS_TEST_JOBS", "2"))
-    jobs = order(build(root))
+    jobs = order(build(root, args))
     # The doc tests: cargo builds and runs them itself.
     jobs.append(("doc", "doc tests",
                  ["cargo", "test", "--release", "--workspace", "--doc", "--", *args], root))
-    jobs = [(n, l, argv if n == "doc" else argv + args, d) for n, l, argv, d in jobs]
 
     started = time.monotonic()
     pending = list(jobs)
     results = []
     lock = threading.Lock()
-    running = {}
+    running = set()
 
     def worker():
         while True:
@@ -110,7 +109,7 @@ def main():
                 if not pending:
                     return
                 name, label, argv, folder = pending.pop(0)
-                running[label] = time.monotonic()
+                running.add(label)
             t0 = time.monotonic()
             proc = subprocess.run(argv, cwd=folder, stdout=subprocess.PIPE,
                                   stderr=subprocess.STDOUT, text=True, errors="replace")
@@ -119,7 +118,7 @@ def main():
             for m in RESULT.finditer(proc.stdout):
                 counts = [c + int(g) for c, g in zip(counts, m.groups())]
             with lock:
-                del running[label]
+                running.discard(label)
                 results.append((label, proc.returncode, took, counts))
                 elapsed = time.monotonic() - started
                 print(f"\n===== {label}: exit {proc.returncode}, {took:.0f} s "
