@@ -16,7 +16,7 @@ use crate::vgg_cmd::VggArgs;
 /// Where a command computes.
 #[derive(Args, Debug, Clone)]
 pub struct DeviceArgs {
-    /// Backend: auto (wgpu where a hardware GPU is present, else flex), flex, ndarray or wgpu.
+    /// Backend: auto (wgpu where a hardware GPU is present, else flex), flex or wgpu.
     #[arg(long, default_value = "auto")]
     pub backend: BackendChoice,
 }

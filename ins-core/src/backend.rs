@@ -13,8 +13,6 @@ pub enum BackendChoice {
     Auto,
     /// Burn's pure-Rust CPU backend (the fastest on CPU).
     Flex,
-    /// The ndarray CPU backend (slow convolution backward; kept for comparison).
-    Ndarray,
     /// wgpu (Vulkan/Metal/DX12; on CPU-only machines Mesa's lavapipe).
     Wgpu,
 }
@@ -25,10 +23,15 @@ impl std::str::FromStr for BackendChoice {
         match s.to_ascii_lowercase().as_str() {
             "auto" => Ok(Self::Auto),
             "flex" | "cpu" => Ok(Self::Flex),
-            "ndarray" => Ok(Self::Ndarray),
             "wgpu" | "gpu" => Ok(Self::Wgpu),
+            // Built in until 2026-11: the largest crate of the build (ten minutes of compiling)
+            // for a CPU backend slower than flex (its convolution backward above all).
+            "ndarray" => Err(
+                "the ndarray backend is no longer built in: flex is the CPU backend (and faster)"
+                    .into(),
+            ),
             _ => Err(format!(
-                "unknown backend {s:?} (expected auto, flex, ndarray or wgpu)"
+                "unknown backend {s:?} (expected auto, flex or wgpu)"
             )),
         }
     }
@@ -39,7 +42,6 @@ impl std::fmt::Display for BackendChoice {
         f.write_str(match self {
             Self::Auto => "auto",
             Self::Flex => "flex",
-            Self::Ndarray => "ndarray",
             Self::Wgpu => "wgpu",
         })
     }
@@ -67,7 +69,6 @@ impl BackendChoice {
     pub fn try_device(self) -> Result<Device, crate::gpu::GpuError> {
         Ok(match self.resolve() {
             Self::Flex | Self::Auto => Device::flex(),
-            Self::Ndarray => Device::ndarray(),
             Self::Wgpu => crate::gpu::device(&vgg_import::source::cache_dir(None).join("cubecl"))?,
         })
     }

@@ -34,11 +34,11 @@ pub fn nearest_bucket(n: usize) -> usize {
 }
 
 /// Whether `device` compiles kernels per size (the CubeCL backends: wgpu), where rounding sizes
-/// up to [`bucket`]s pays; the CPU backends (flex, ndarray) answer no.
+/// up to [`bucket`]s pays; the CPU backend (flex) answers no.
 pub fn compiles_per_size(device: &Device) -> bool {
     !matches!(
         device.clone().inner().as_dispatch(),
-        DispatchDevice::Flex(_) | DispatchDevice::NdArray(_)
+        DispatchDevice::Flex(_)
     )
 }
 

@@ -1,5 +1,5 @@
-//! The same seed, model and loss give the same loss value and the same gradients on flex,
-//! ndarray and wgpu (Mesa lavapipe where there is no GPU). Gradients, not an Adam step: Adam's
+//! The same seed, model and loss give the same loss value and the same gradients on flex and
+//! wgpu (Mesa lavapipe where there is no GPU). Gradients, not an Adam step: Adam's
 //! first step is ≈ lr·sign(g) and would hide an error in the gradient's magnitude.
 //!
 //! An earlier session saw wgpu's backward deadlock in-process here (Burn 0.22.1 / CubeCL 0.11.3,
@@ -35,11 +35,7 @@ fn config() -> SirenRunConfig {
 
 /// Pixel MSE + 10·style loss through a small VGG, both styles, on `backend`; returns the loss
 /// and the gradients of parameters of every module (CIM, AM, head, γ, SIM).
-fn loss_and_gradients(
-    backend: BackendChoice,
-    init: &[u8],
-    gradients: bool,
-) -> (f32, Vec<Vec<f32>>) {
+fn loss_and_gradients(backend: BackendChoice, init: &[u8]) -> (f32, Vec<Vec<f32>>) {
     let device = backend.device().autodiff();
     let cfg = config();
     let model: Ins<SirenCim> = load_module_bytes(
@@ -79,9 +75,6 @@ fn loss_and_gradients(
     let loss = mse(rgb, target.expand([2, SIDE * SIDE, 3]))
         + style_loss(&vgg.features(img), &grams).mul_scalar(10.0);
     let value = loss.clone().into_scalar::<f32>();
-    if !gradients {
-        return (value, Vec::new());
-    }
     let grads = loss.backward();
     let g = |t: Tensor<2>| values(t.grad(&grads).expect("gradient"));
     let grads = vec![
@@ -95,36 +88,29 @@ fn loss_and_gradients(
 }
 
 #[test]
-fn flex_ndarray_and_wgpu_agree_on_loss_and_flex_ndarray_on_gradients() {
+fn flex_and_wgpu_agree_on_loss_and_gradients() {
     let flex = Device::flex();
     flex.seed(5);
     let mut cfg = config().build_model(&flex);
     // Leave the identity start so that SIM and AM get gradients too.
     cfg.am.gamma = burn::module::Param::from_tensor(Tensor::from_floats([0.6], &flex));
     let init = module_bytes(&cfg).unwrap();
-    let (l_flex, g_flex) = loss_and_gradients(BackendChoice::Flex, &init, true);
+    let (l_flex, g_flex) = loss_and_gradients(BackendChoice::Flex, &init);
     assert!(l_flex.is_finite() && l_flex > 0.0);
     for g in &g_flex {
         assert!(g.iter().any(|v| *v != 0.0), "a gradient is zero on flex");
     }
-    for (backend, gradients) in [(BackendChoice::Ndarray, true), (BackendChoice::Wgpu, true)] {
-        let init = init.clone();
-        let (l, g) = ins_tests::within(
-            ins_tests::WGPU_LIMIT_S,
-            &format!("the {backend} loss"),
-            move || loss_and_gradients(backend, &init, gradients),
+    let (l, g) = ins_tests::within(ins_tests::WGPU_LIMIT_S, "the wgpu loss", move || {
+        loss_and_gradients(BackendChoice::Wgpu, &init)
+    });
+    let rel = (l - l_flex).abs() / l_flex;
+    assert!(rel < 1e-4, "wgpu: loss {l} vs flex {l_flex}");
+    assert_eq!(g.len(), g_flex.len());
+    for (i, (a, b)) in g.iter().zip(&g_flex).enumerate() {
+        let d = max_rel_diff(a, b, 1e-12);
+        assert!(
+            d < 1e-4,
+            "wgpu: gradient {i} differs from flex by {d} (relative to its largest entry)"
         );
-        let rel = (l - l_flex).abs() / l_flex;
-        assert!(rel < 1e-4, "{backend}: loss {l} vs flex {l_flex}");
-        if gradients {
-            assert_eq!(g.len(), g_flex.len());
-        }
-        for (i, (a, b)) in g.iter().zip(&g_flex).enumerate() {
-            let d = max_rel_diff(a, b, 1e-12);
-            assert!(
-                d < 1e-4,
-                "{backend}: gradient {i} differs from flex by {d} (relative to its largest entry)"
-            );
-        }
     }
 }

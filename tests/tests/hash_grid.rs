@@ -1,5 +1,5 @@
 //! The hash-encoding kernel op equals the plain Burn-ops reference in value and in gradient
-//! (table and positions) on flex, ndarray and wgpu (the CubeCL kernels; Mesa's lavapipe where
+//! (table and positions) on flex and wgpu (the CubeCL kernels; Mesa's lavapipe where
 //! there is no GPU), and the reference agrees with itself on every backend; the same for the
 //! spatial Jacobian and its gradient.
 
@@ -103,8 +103,6 @@ fn kernel_op_equals_the_reference_in_value_and_gradient_on_every_backend() {
     assert!(truth.grad_positions.iter().any(|v| *v != 0.0));
     let cases = [
         ("flex kernel", BackendChoice::Flex, true),
-        ("ndarray kernel", BackendChoice::Ndarray, true),
-        ("ndarray reference", BackendChoice::Ndarray, false),
         ("wgpu reference", BackendChoice::Wgpu, false),
         ("wgpu kernel", BackendChoice::Wgpu, true),
     ];

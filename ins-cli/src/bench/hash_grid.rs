@@ -42,7 +42,7 @@ pub fn run(device: &Device, steps: usize, kernel: bool, points: Points) -> Resul
     let g = Tensor::<2>::random([POINTS, grid.d_out()], Distribution::Default, device);
     if kernel && !op::kernel_device(device) {
         bail!(
-            "the hash-grid kernel runs on flex, ndarray and the CubeCL backends (wgpu) only (this is {device:?})"
+            "the hash-grid kernel runs on flex and the CubeCL backends (wgpu) only (this is {device:?})"
         );
     }
     let times = timed(steps, || {

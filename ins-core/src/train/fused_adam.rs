@@ -239,15 +239,19 @@ mod tests {
 
     const N: usize = CHUNK * 2 + 77;
 
-    fn start(device: &Device) -> Two {
+    fn start(device: &Device, dtype: DType) -> Two {
         let a: Vec<f32> = (0..N)
             .map(|i| ((i * 37 % 101) as f32 - 50.0) / 50.0)
             .collect();
         Two {
             a: burn::module::Param::from_tensor(
-                Tensor::<1>::from_floats(a.as_slice(), device).reshape([N, 1]),
+                Tensor::<1>::from_floats(a.as_slice(), device)
+                    .reshape([N, 1])
+                    .cast(dtype),
             ),
-            b: burn::module::Param::from_tensor(Tensor::from_floats([0.5, -1.0, 2.0], device)),
+            b: burn::module::Param::from_tensor(
+                Tensor::from_floats([0.5, -1.0, 2.0], device).cast(dtype),
+            ),
         }
     }
 
@@ -260,7 +264,9 @@ mod tests {
                     (((i * 7919 + step * 104_729) % 2003) as f32 / 1001.0 - 1.0) * (step + 1) as f32
                 })
                 .collect();
-            let target = Tensor::<1>::from_floats(target.as_slice(), &device).reshape([N, 1]);
+            let target = Tensor::<1>::from_floats(target.as_slice(), &device)
+                .reshape([N, 1])
+                .cast(model.a.val().dtype());
             let loss = (model.a.val() - target).square().sum()
                 + (model.b.val() * model.b.val()).sum().mul_scalar(3.0);
             let grads = GradientsParams::from_grads(loss.backward(), &model);
@@ -283,35 +289,41 @@ mod tests {
         assert!((b[0] - 0.5).abs() > 1e-2);
     }
 
-    /// Burn's Adam and this one from the same start on the same losses, on `device`.
-    fn agree_on(device: Device) {
-        let fused = run(&mut FusedAdam::default().init(), start(&device), 0..5);
-        let burn = run(&mut burns_adam(), start(&device), 0..5);
+    /// Burn's Adam and this one from the same start on the same losses, on `device`, with
+    /// parameters of `dtype`.
+    fn agree_on(device: Device, dtype: DType) {
+        let fused = run(
+            &mut FusedAdam::default().init(),
+            start(&device, dtype),
+            0..5,
+        );
+        let burn = run(&mut burns_adam(), start(&device, dtype), 0..5);
         assert_close(&fused, &burn);
     }
 
     #[test]
     fn the_fused_kernel_matches_burns_adam_over_several_steps() {
-        agree_on(Device::flex().autodiff());
+        agree_on(Device::flex().autodiff(), DType::F32);
     }
 
+    /// The tensor-op path (wgpu, and any parameter not in f32) on the CPU: f64 parameters.
     #[test]
     fn the_tensor_op_fallback_matches_burns_adam_over_several_steps() {
-        agree_on(Device::ndarray().autodiff());
+        agree_on(Device::flex().autodiff(), DType::F64);
     }
 
     #[test]
     fn a_state_saved_by_burns_adam_resumes_here() {
         let device = Device::flex().autodiff();
         let mut adam = burns_adam();
-        let half = run(&mut adam, start(&device), 0..3);
+        let half = run(&mut adam, start(&device, DType::F32), 0..3);
         let bytes = adam.into_bytes().unwrap();
         let mut fused = FusedAdam::default().init().from_bytes(bytes).unwrap();
         let resumed = run(&mut fused, half, 3..5);
-        let burn = run(&mut burns_adam(), start(&device), 0..5);
+        let burn = run(&mut burns_adam(), start(&device, DType::F32), 0..5);
         assert_close(&resumed, &burn);
         // Without the saved moments the resumed run would differ.
-        let half = run(&mut burns_adam(), start(&device), 0..3);
+        let half = run(&mut burns_adam(), start(&device, DType::F32), 0..3);
         let fresh = run(&mut FusedAdam::default().init(), half, 3..5);
         let diff = (values(fresh.b.val())[0] - values(burn.b.val())[0]).abs();
         assert!(diff > 1e-4, "moments made no difference ({diff})");

@@ -4,7 +4,7 @@
 //! - [`kernel`]: the maths on slices (forward, both backwards, the spatial Jacobian).
 //! - [`cube`]: the same maths as CubeCL kernels for the GPU backends (device code in
 //!   `cube_kernels`).
-//! - [`op`]: a Burn op with a hand-written backward that runs the kernels on Flex, NdArray and
+//! - [`op`]: a Burn op with a hand-written backward that runs the kernels on Flex and
 //!   the CubeCL backends.
 //! - [`reference`]: the same function from ordinary Burn ops (the tests' yardstick, and any
 //!   backend without the op).

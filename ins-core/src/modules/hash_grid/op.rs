@@ -1,5 +1,5 @@
 //! The hash encoding as a Burn op with a hand-written backward: the plain-Rust kernels of
-//! [`super::kernel`] on the CPU backends (Flex, NdArray), the CubeCL kernels of [`super::cube`]
+//! [`super::kernel`] on the CPU backend (Flex), the CubeCL kernels of [`super::cube`]
 //! on the GPU ones (through Fusion, as an opaque operation), and under autodiff.
 //!
 //! Through ordinary Burn ops the encoding is 8·L gathers per point, each with a scatter-add in
@@ -14,11 +14,10 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
-use burn::backend::ops::FloatTensorOps;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
-    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, NdArray, Shape,
-    TensorData, TensorMetadata, backend_extension, read_sync,
+    Autodiff, AutodiffBackend, Backend, DType, Dispatch, DispatchDevice, Flex, Shape, TensorData,
+    TensorMetadata, backend_extension,
 };
 use burn::prelude::*;
 
@@ -29,7 +28,7 @@ use super::cube;
 use super::kernel::{self, GridShape};
 
 /// The hash encoding's forward, backward and Jacobian as backend operations.
-#[backend_extension(Flex, NdArray, Cube, Fusion, Autodiff)]
+#[backend_extension(Flex, Cube, Fusion, Autodiff)]
 pub trait HashGridOps: Backend {
     /// `positions [N, 3]` in `[0, 1]`, `table [R, F]` → `[N, L·F]`.
     #[fusion(dtype = positions, shape = Shape::new([positions[0], shape.d_out()]))]
@@ -165,91 +164,6 @@ impl HashGridOps for Flex {
             })
         });
         flex_from(g, [layout.total_rows(), layout.features])
-    }
-}
-
-/// NdArray (kept for comparison, never fast): values go through `TensorData`.
-fn nd_values(t: FloatTensor<NdArray>) -> Vec<f32> {
-    read_sync(NdArray::float_into_data(t))
-        .expect("reading an ndarray tensor")
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .expect("f32 values")
-}
-
-fn nd_from(values: Vec<f32>, shape: impl Into<burn::backend::Shape>) -> FloatTensor<NdArray> {
-    NdArray::float_from_data(TensorData::new(values, shape.into()), &Default::default())
-}
-
-impl HashGridOps for NdArray {
-    fn hash_grid_forward(
-        positions: FloatTensor<Self>,
-        table: FloatTensor<Self>,
-        shape: GridShape,
-    ) -> FloatTensor<Self> {
-        let layout = shape.layout();
-        let n = rows(&positions);
-        let mut out = vec![0.0; n * shape.d_out()];
-        kernel::forward(&layout, &nd_values(table), &nd_values(positions), &mut out);
-        nd_from(out, [n, shape.d_out()])
-    }
-
-    fn hash_grid_backward_table(
-        positions: FloatTensor<Self>,
-        grad_out: FloatTensor<Self>,
-        shape: GridShape,
-    ) -> FloatTensor<Self> {
-        let layout = shape.layout();
-        let mut g = vec![0.0; layout.total_rows() * layout.features];
-        kernel::backward_table(&layout, &nd_values(positions), &nd_values(grad_out), &mut g);
-        nd_from(g, [layout.total_rows(), layout.features])
-    }
-
-    fn hash_grid_backward_positions(
-        positions: FloatTensor<Self>,
-        table: FloatTensor<Self>,
-        grad_out: FloatTensor<Self>,
-        shape: GridShape,
-    ) -> FloatTensor<Self> {
-        let layout = shape.layout();
-        let n = rows(&positions);
-        let mut g = vec![0.0; n * 3];
-        kernel::backward_positions(
-            &layout,
-            &nd_values(table),
-            &nd_values(positions),
-            &nd_values(grad_out),
-            &mut g,
-        );
-        nd_from(g, [n, 3])
-    }
-
-    fn hash_grid_jacobian(
-        positions: FloatTensor<Self>,
-        table: FloatTensor<Self>,
-        shape: GridShape,
-    ) -> FloatTensor<Self> {
-        let layout = shape.layout();
-        let n = rows(&positions);
-        let mut j = vec![0.0; n * shape.d_out() * 3];
-        kernel::jacobian(&layout, &nd_values(table), &nd_values(positions), &mut j);
-        nd_from(j, [n, shape.d_out(), 3])
-    }
-
-    fn hash_grid_jacobian_backward_table(
-        positions: FloatTensor<Self>,
-        grad_jac: FloatTensor<Self>,
-        shape: GridShape,
-    ) -> FloatTensor<Self> {
-        let layout = shape.layout();
-        let mut g = vec![0.0; layout.total_rows() * layout.features];
-        kernel::jacobian_backward_table(
-            &layout,
-            &nd_values(positions),
-            &nd_values(grad_jac),
-            &mut g,
-        );
-        nd_from(g, [layout.total_rows(), layout.features])
     }
 }
 
@@ -419,12 +333,12 @@ impl<B: Backend + HashGridOps, C: CheckpointStrategy> HashGridOps for Autodiff<B
     }
 }
 
-/// Whether the kernels run on this device (Flex, NdArray or a CubeCL runtime, with or without
+/// Whether the kernels run on this device (Flex or a CubeCL runtime, with or without
 /// autodiff).
 pub fn kernel_device(device: &Device) -> bool {
     matches!(
         device.clone().inner().as_dispatch(),
-        DispatchDevice::Flex(_) | DispatchDevice::NdArray(_) | DispatchDevice::Cube(_)
+        DispatchDevice::Flex(_) | DispatchDevice::Cube(_)
     )
 }
 
