@@ -95,3 +95,32 @@ pub fn hardware_gpu_present() -> bool {
         })
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::BackendChoice;
+
+    #[test]
+    fn names_parse_and_print_back() {
+        for name in ["auto", "flex", "wgpu"] {
+            let choice: BackendChoice = name.parse().unwrap();
+            assert_eq!(choice.to_string(), name);
+        }
+        assert_eq!("CPU".parse::<BackendChoice>(), Ok(BackendChoice::Flex));
+        assert_eq!("gpu".parse::<BackendChoice>(), Ok(BackendChoice::Wgpu));
+    }
+
+    #[test]
+    fn the_dropped_ndarray_backend_points_to_flex() {
+        let e = "ndarray".parse::<BackendChoice>().unwrap_err();
+        assert!(
+            e.contains("no longer built in") && e.contains("flex"),
+            "{e}"
+        );
+        let e = "cuda".parse::<BackendChoice>().unwrap_err();
+        assert!(
+            e.contains("\"cuda\"") && e.contains("auto, flex or wgpu"),
+            "{e}"
+        );
+    }
+}
