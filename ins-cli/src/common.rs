@@ -112,6 +112,7 @@ pub fn print_summary<M>(out: &Path, outcome: &TrainOutcome<M>) {
         "steps": outcome.steps,
         "seconds": (outcome.seconds * 10.0).round() / 10.0,
         "last": outcome.last,
+        "warnings": outcome.warnings,
     });
     println!("{summary}");
 }

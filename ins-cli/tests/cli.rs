@@ -40,6 +40,7 @@ fn quick_run_on_the_builtin_input_then_render_any_size_and_mix() {
         "{summary}"
     );
     assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+    assert_eq!(summary["warnings"], serde_json::json!([]), "{summary}");
     for f in [
         "stylized.png",
         "preview.png",

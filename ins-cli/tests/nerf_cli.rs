@@ -326,11 +326,14 @@ fn a_stylization_whose_colours_collapse_is_told_with_the_way_out() {
         let mut extra = vec!["--steps", "20", "--patch", "24", "--style-size", "64"];
         extra.extend_from_slice(lr);
         let o = ok(stylize_nerf(&run, &[&stripes], &out, &extra));
-        (stderr(&o), saturated_logged(&out))
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let warned = summary["warnings"].as_array().map(Vec::len);
+        (stderr(&o), saturated_logged(&out), warned)
     };
     // At the default rate the renders keep their colours: nothing to tell.
-    let (e, logged) = stylize("default", &[]);
+    let (e, logged, warned) = stylize("default", &[]);
     assert!(!e.contains("warning"), "{e}");
+    assert_eq!(warned, Some(0));
     assert!(
         logged.len() == 2 && logged.iter().all(|&v| v < 0.5),
         "{logged:?}"
@@ -340,8 +343,13 @@ fn a_stylization_whose_colours_collapse_is_told_with_the_way_out() {
     // logging 0.76–1.0 at steps 9 and 19; the object's pixels pure red, blue, white or black
     // from step 2 on), and the run says so once, with the rate and the flag to change, and
     // still finishes.
-    let (e, logged) = stylize("collapsed", &["--lr", "1"]);
+    let (e, logged, warned) = stylize("collapsed", &["--lr", "1"]);
     assert_eq!(e.matches("warning: step").count(), 1, "{e}");
+    assert_eq!(
+        warned,
+        Some(1),
+        "the summary on stdout lists the warning too"
+    );
     assert!(
         e.contains("saturated") && e.contains("(1.0e0)") && e.contains("lower --lr"),
         "{e}"

@@ -1,12 +1,14 @@
 //! The shared trainer on a toy model: NaN guard with the last good checkpoint kept, frozen
-//! groups, per-group learning rates, phases, and configurations refused before a step runs.
+//! groups, per-group learning rates, phases, configurations refused before a step runs, and a
+//! watched probe's warning at the same step whether or not the run was resumed.
 
 use anyhow::Result;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes};
 use ins_core::train::{
-    GroupSpec, LossTerms, Optimizable, Phase, StepContext, Task, TrainError, TrainOptions, Trainer,
+    GroupSpec, LossTerms, Optimizable, Phase, Probe, StepContext, Task, TrainError, TrainOptions,
+    Trainer, Watch,
 };
 use ins_tests::values;
 
@@ -37,12 +39,16 @@ enum Fit {
 }
 
 /// Regression of y = x0 − x1; turns the loss into NaN from `nan_from` on, and into a constant
-/// no parameter reaches at the steps listed in `untracked`.
+/// no parameter reaches at the steps listed in `untracked`; with `watched`, reports a probe
+/// always past its limit (a warning after [`WATCHED_STEPS`] steps).
 struct ToyTask {
     nan_from: usize,
     global: usize,
     untracked: Vec<usize>,
+    watched: bool,
 }
+
+const WATCHED_STEPS: usize = 5;
 
 impl Task for ToyTask {
     type Model = Toy;
@@ -63,7 +69,20 @@ impl Task for ToyTask {
             loss = Tensor::<1>::from_floats([0.5], &device);
         }
         self.global += 1;
-        Ok(LossTerms::default().term("mse", loss))
+        let terms = LossTerms::default().term("mse", loss);
+        Ok(if self.watched {
+            terms.probe(Probe {
+                name: "stuck",
+                value: Tensor::from_floats([1.0], &device),
+                watch: Some(Watch {
+                    limit: 0.5,
+                    steps: WATCHED_STEPS,
+                    warning: "the toy is stuck".into(),
+                }),
+            })
+        } else {
+            terms
+        })
     }
 }
 
@@ -72,6 +91,7 @@ fn task() -> ToyTask {
         nan_from: usize::MAX,
         global: 0,
         untracked: Vec::new(),
+        watched: false,
     }
 }
 
@@ -106,6 +126,7 @@ fn nan_stops_with_a_typed_error_and_keeps_the_last_good_checkpoint() {
         nan_from: 5,
         global: 0,
         untracked: Vec::new(),
+        watched: false,
     };
     let err = t
         .run(&mut nan, toy(&device))
@@ -252,4 +273,42 @@ fn a_loss_no_parameter_reaches_skips_the_update() {
     };
     let out = t.run(&mut one, toy(&device)).unwrap();
     assert_ne!(values(out.model.a.weight.val()), before);
+}
+
+#[test]
+fn a_watched_probe_warns_at_the_same_step_when_the_run_is_resumed() {
+    let device = Device::flex().autodiff();
+    let watched = || ToyTask {
+        watched: true,
+        ..task()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let whole = Trainer::new(vec![fit(8, 1e-2)], quiet(dir.path()))
+        .run(&mut watched(), toy(&device))
+        .unwrap();
+    let at = format!("step {}:", WATCHED_STEPS - 1);
+    assert_eq!(whole.warnings.len(), 1, "{:?}", whole.warnings);
+    assert!(whole.warnings[0].contains(&at), "{}", whole.warnings[0]);
+    assert!(whole.warnings[0].contains("the toy is stuck"));
+
+    // Stopped by a NaN at step 3, so the newest checkpoint is the one taken before step 2;
+    // resumed from there: the run of steps past the limit counts the two steps before the
+    // checkpoint, and step 2 once.
+    let dir = tempfile::tempdir().unwrap();
+    let mut o = quiet(dir.path());
+    let mut failing = ToyTask {
+        nan_from: 3,
+        ..watched()
+    };
+    let e = Trainer::new(vec![fit(8, 1e-2)], o.clone())
+        .run(&mut failing, toy(&device))
+        .err()
+        .unwrap();
+    assert!(matches!(e, TrainError::Diverged { step: 3, .. }), "{e}");
+    o.resume = true;
+    let resumed = Trainer::new(vec![fit(8, 1e-2)], o)
+        .run(&mut watched(), toy(&device))
+        .unwrap();
+    assert_eq!(resumed.warnings.len(), 1, "{:?}", resumed.warnings);
+    assert!(resumed.warnings[0].contains(&at), "{}", resumed.warnings[0]);
 }

@@ -74,6 +74,8 @@ pub struct TrainOutcome<M> {
     pub last: BTreeMap<String, f64>,
     /// Wall time of this process's training, in seconds.
     pub seconds: f64,
+    /// The probes' warnings this process printed (a task's watched limits, e.g. saturation).
+    pub warnings: Vec<String>,
 }
 
 /// Runs phases of a [`Task`].
@@ -88,6 +90,9 @@ struct TrainerState {
     step: usize,
     seed: u64,
     history: Vec<serde_json::Value>,
+    /// The probes' runs past their limits before `step` (absent in older checkpoints).
+    #[serde(default)]
+    watch: ProbeWatch,
 }
 
 /// A per-step seed derived from the run seed (SplitMix64).
@@ -164,7 +169,8 @@ impl<O: Objective> Trainer<O> {
         let t0 = Instant::now();
         let mut last = BTreeMap::new();
         let mut current_phase = None;
-        let mut watch = ProbeWatch::default();
+        let mut watch = std::mem::take(&mut state.watch);
+        let mut warnings = Vec::new();
         let mut step = start;
         while step < total && self.opts.stop_after.is_none_or(|n| step - start < n) {
             let (pi, in_phase) = self.phase_at(step);
@@ -194,15 +200,18 @@ impl<O: Objective> Trainer<O> {
                 && step > start
                 && step.is_multiple_of(self.opts.checkpoint_every);
             let task_state = if due { Some(task.save_state()?) } else { None };
+            let watch_state = due.then(|| watch.clone());
             let mut terms = task.losses(&model, &ctx)?;
             check_declared(&terms, phase, task.terms(phase.objective))?;
             let values = StepValues::read(&terms, phase, step, lr, || store.latest_path())?;
             for warning in watch.observe(&terms.probes, &values.probes, step) {
-                progress.warn(warning);
+                progress.warn(&warning);
+                warnings.push(warning);
             }
             // Parameters that produced a finite loss are the ones checkpointed.
-            if let Some(task_state) = task_state {
+            if let (Some(task_state), Some(watch_state)) = (task_state, watch_state) {
                 state.step = step;
+                state.watch = watch_state;
                 self.save(&store, &model, &optim, &state, task_state)?;
                 self.write_plot(&state, task);
             }
@@ -262,6 +271,7 @@ impl<O: Objective> Trainer<O> {
             first.done();
         }
         state.step = step;
+        state.watch = watch;
         if !params_finite(&model) {
             return Err(TrainError::NonFiniteParameters {
                 step,
@@ -276,6 +286,7 @@ impl<O: Objective> Trainer<O> {
             finished: step >= total,
             last,
             seconds: t0.elapsed().as_secs_f64(),
+            warnings,
         })
     }
 

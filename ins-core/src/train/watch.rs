@@ -2,12 +2,20 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
+use serde::{Deserialize, Serialize};
+
 use super::task::Probe;
 
 /// How many steps in a row each watched probe has been past its limit, and which have warned.
-#[derive(Debug, Default)]
+///
+/// Checkpoints keep the runs, so a run of steps that a resume cuts in two still counts whole.
+/// They do not keep which probes warned: whoever resumes may not have seen the first process's
+/// output, and a probe still past its limit warns again at once.
+#[derive(Debug, Default, Clone, Serialize, Deserialize)]
+#[serde(default)]
 pub struct ProbeWatch {
-    run: BTreeMap<&'static str, usize>,
+    run: BTreeMap<String, usize>,
+    #[serde(skip)]
     warned: BTreeSet<&'static str>,
 }
 
@@ -18,7 +26,7 @@ impl ProbeWatch {
         let mut due = Vec::new();
         for (probe, &value) in probes.iter().zip(values) {
             let Some(watch) = &probe.watch else { continue };
-            let run = self.run.entry(probe.name).or_default();
+            let run = self.run.entry(probe.name.to_string()).or_default();
             *run = if value > watch.limit { *run + 1 } else { 0 };
             if *run >= watch.steps.max(1) && self.warned.insert(probe.name) {
                 due.push(format!(
@@ -65,6 +73,29 @@ mod tests {
             due[0]
         );
         assert!(w.observe(&p, &[0.9], 6).is_empty(), "said twice");
+    }
+
+    #[test]
+    fn a_saved_watch_keeps_the_run_and_warns_again_if_still_past() {
+        let p = [probe(0.5)];
+        let mut w = ProbeWatch::default();
+        for step in 0..2 {
+            assert!(w.observe(&p, &[0.9], step).is_empty());
+        }
+        let saved = serde_json::to_value(&w).unwrap();
+        // Resumed after two steps past the limit: the third makes the warning.
+        let mut resumed: ProbeWatch = serde_json::from_value(saved).unwrap();
+        let due = resumed.observe(&p, &[0.9], 2);
+        assert_eq!(due.len(), 1, "the run was not kept");
+        assert!(due[0].contains("3 steps in a row"), "{}", due[0]);
+        // Saved after it warned: a resumed process says it again once.
+        let mut again: ProbeWatch =
+            serde_json::from_value(serde_json::to_value(&resumed).unwrap()).unwrap();
+        assert_eq!(again.observe(&p, &[0.9], 3).len(), 1);
+        assert!(again.observe(&p, &[0.9], 4).is_empty());
+        // An old checkpoint without a watch reads as a fresh one.
+        let empty: ProbeWatch = serde_json::from_str("{}").unwrap();
+        assert!(empty.run.is_empty());
     }
 
     #[test]
