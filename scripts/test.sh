@@ -2,7 +2,7 @@
 # The test suite: installs what is missing, then runs every test of the workspace.
 # It builds into the same target folder as the README's main command (./target, release
 # profile), so on a fresh machine Burn compiles once for both. The first run builds Burn
-# (20 to 55 minutes on 2 cores, by CPU) and fetches VGG-16 (65 MB) once.
+# (20 to 45 minutes on 2 cores, by CPU) and fetches VGG-16 (65 MB) once.
 #
 #   bash scripts/test.sh                 every test, two test programs at a time (run_tests.py)
 #   bash scripts/test.sh -- FILTER      the same, passing FILTER to every test program
