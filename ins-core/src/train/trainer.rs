@@ -195,12 +195,16 @@ impl<O: Objective> Trainer<O> {
             };
             let lr = phase.lr.at(in_phase);
             let ts = Instant::now();
-            // The task's state before this step belongs with the parameters before it.
+            // The task's state and the probes' watch before this step belong with the
+            // parameters before it.
             let due = self.opts.checkpoint_every > 0
                 && step > start
                 && step.is_multiple_of(self.opts.checkpoint_every);
-            let task_state = if due { Some(task.save_state()?) } else { None };
-            let watch_state = due.then(|| watch.clone());
+            let before = if due {
+                Some((task.save_state()?, watch.clone()))
+            } else {
+                None
+            };
             let mut terms = task.losses(&model, &ctx)?;
             check_declared(&terms, phase, task.terms(phase.objective))?;
             let values = StepValues::read(&terms, phase, step, lr, || store.latest_path())?;
@@ -209,7 +213,7 @@ impl<O: Objective> Trainer<O> {
                 warnings.push(warning);
             }
             // Parameters that produced a finite loss are the ones checkpointed.
-            if let (Some(task_state), Some(watch_state)) = (task_state, watch_state) {
+            if let Some((task_state, watch_state)) = before {
                 state.step = step;
                 state.watch = watch_state;
                 self.save(&store, &model, &optim, &state, task_state)?;
