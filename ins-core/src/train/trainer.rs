@@ -21,7 +21,7 @@ use super::metrics::MetricsLog;
 use super::phase::{Objective, Phase};
 use super::plot::plot_history;
 use super::progress::{FirstStep, Progress};
-use super::task::{StepContext, Task};
+use super::task::{LossTerms, StepContext, Task};
 use super::watch::ProbeWatch;
 
 /// Run-level options.
@@ -370,10 +370,30 @@ impl<O: Objective> Trainer<O> {
     }
 }
 
-/// Back-propagates a step's weighted total, adds the gradients the task took itself
-/// (`deferred`), and takes the Adam step with the phase's learning rates. A total no parameter
-/// reaches (an IDR patch whose rays all missed the surface), with none taken by the task, has
-/// nothing to teach: the parameters and Adam stay as they are.
+/// The gradients of a step: its weighted total back-propagated, plus those the task took
+/// itself (`deferred`). `None` for a total no parameter reaches (an IDR patch whose rays all
+/// missed the surface) with none taken by the task: such a step has nothing to teach.
+fn step_gradients<M: Module>(
+    model: &M,
+    total: &Tensor<1>,
+    deferred: Option<GradientsParams>,
+) -> Option<GradientsParams> {
+    let direct = || GradientsParams::from_grads(total.clone().backward(), model);
+    match (total.is_tracked(), deferred) {
+        (false, None) => None,
+        (true, None) => Some(direct()),
+        (false, Some(deferred)) => Some(deferred),
+        (true, Some(deferred)) => {
+            let mut sum = GradientsAccumulator::<M>::new();
+            sum.accumulate(model, deferred);
+            sum.accumulate(model, direct());
+            Some(sum.grads())
+        }
+    }
+}
+
+/// Takes the Adam step of a step's [`step_gradients`] with the phase's learning rates; where
+/// there are none, the parameters and Adam stay as they are.
 fn update<M: Module>(
     model: M,
     optim: &mut ModuleOptimizer,
@@ -383,19 +403,10 @@ fn update<M: Module>(
     total: &Tensor<1>,
     deferred: Option<GradientsParams>,
 ) -> M {
-    let direct = || GradientsParams::from_grads(total.clone().backward(), &model);
-    let grads = match (total.is_tracked(), deferred) {
-        (false, None) => return model,
-        (true, None) => direct(),
-        (false, Some(deferred)) => deferred,
-        (true, Some(deferred)) => {
-            let mut sum = GradientsAccumulator::<M>::new();
-            sum.accumulate(&model, deferred);
-            sum.accumulate(&model, direct());
-            sum.grads()
-        }
-    };
-    optim.step(groups.learning_rates(lr, &phase.groups), model, grads)
+    match step_gradients(&model, total, deferred) {
+        Some(grads) => optim.step(groups.learning_rates(lr, &phase.groups), model, grads),
+        None => model,
+    }
 }
 
 /// One phase's training step outside a run, exactly as the trainer takes it (the task's terms
@@ -429,6 +440,21 @@ impl<O: Objective> Stepper<O> {
         ))
     }
 
+    /// The weighted loss of the next step of `task` on `model` and its gradients, without
+    /// taking the step: what the backends are compared on, since Adam's first step
+    /// (≈ lr·sign(g)) would hide an error in a gradient's scale. `None` where the step has
+    /// nothing to differentiate.
+    pub fn loss_and_gradients<T: Task<Objective = O>>(
+        &self,
+        task: &mut T,
+        model: &T::Model,
+    ) -> Result<(f64, Option<GradientsParams>), TrainError> {
+        let ctx = standalone_context(&self.phase, self.step);
+        let (mut terms, values) = evaluate(task, model, &ctx)?;
+        let grads = step_gradients(model, &values.total, terms.gradients.take());
+        Ok((values.total_value, grads))
+    }
+
     /// Takes one step of `task` on `model`; returns the updated model, the weighted loss and
     /// the step's metrics (the task's and those of its `after_step`).
     pub fn step<T: Task<Objective = O>>(
@@ -436,21 +462,14 @@ impl<O: Objective> Stepper<O> {
         task: &mut T,
         model: T::Model,
     ) -> Result<(T::Model, f64, Vec<(String, f64)>), TrainError> {
-        let ctx = StepContext {
-            phase: &self.phase,
-            step_in_phase: self.step,
-            global_step: self.step,
-            seed: step_seed(0, self.step),
-        };
-        let lr = self.phase.lr.at(self.step);
-        let mut terms = task.losses(&model, &ctx)?;
-        let values = StepValues::read(&terms, &self.phase, self.step, lr, || None)?;
+        let ctx = standalone_context(&self.phase, self.step);
+        let (mut terms, values) = evaluate(task, &model, &ctx)?;
         let model = update(
             model,
             &mut self.optim,
             &self.groups,
             &self.phase,
-            lr,
+            self.phase.lr.at(self.step),
             &values.total,
             terms.gradients.take(),
         );
@@ -466,6 +485,28 @@ impl<O: Objective> Stepper<O> {
         self.step += 1;
         Ok((model, values.total_value, metrics))
     }
+}
+
+/// Step `step` of `phase` outside a run: the run's step is the phase's, seeded as seed 0.
+fn standalone_context<O>(phase: &Phase<O>, step: usize) -> StepContext<'_, O> {
+    StepContext {
+        phase,
+        step_in_phase: step,
+        global_step: step,
+        seed: step_seed(0, step),
+    }
+}
+
+/// The task's terms at `ctx` and their values, read back (a NaN stops here).
+fn evaluate<T: Task>(
+    task: &mut T,
+    model: &T::Model,
+    ctx: &StepContext<T::Objective>,
+) -> Result<(LossTerms, StepValues), TrainError> {
+    let terms = task.losses(model, ctx)?;
+    let lr = ctx.phase.lr.at(ctx.step_in_phase);
+    let values = StepValues::read(&terms, ctx.phase, ctx.step_in_phase, lr, || None)?;
+    Ok((terms, values))
 }
 
 /// A task must return only the terms it declares for the objective.

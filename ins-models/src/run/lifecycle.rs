@@ -9,7 +9,7 @@ use burn::prelude::*;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{LossWeights, PerceptualLoss};
 use ins_core::train::checkpoint::{CheckpointStore, load_module_bytes, module_bytes};
-use ins_core::train::{RunFolder, TrainError, TrainOptions, TrainOutcome, Trainer};
+use ins_core::train::{Phase, RunFolder, RunLock, TrainError, TrainOptions, TrainOutcome, Trainer};
 use vgg_import::{Preprocess, Vgg};
 
 use super::args::RunKind;
@@ -29,6 +29,47 @@ pub fn train<V: Variant>(
     device: &Device,
     opts: TrainOptions,
 ) -> Result<TrainOutcome<V::Model>> {
+    let Prepared {
+        cfg,
+        model,
+        mut task,
+        phases,
+        folder,
+        lock: _lock,
+    } = prepare::<V>(cfg, vgg, device, &opts)?;
+    let outcome = Trainer::new(phases, opts).run(&mut task, model)?;
+    if outcome.finished {
+        V::final_report(&outcome.model, &task, &cfg, &folder, device)?;
+    }
+    Ok(outcome)
+}
+
+/// A run ready for its first step: the folder locked and its `config.json` written, the
+/// config resolved, the model (drawn or loaded), the task and the phases built.
+pub struct Prepared<V: Variant> {
+    /// The resolved configuration (as written to `config.json`).
+    pub cfg: V::Config,
+    /// The model on the autodiff device, before any step.
+    pub model: V::Model,
+    /// The training task.
+    pub task: V::Task,
+    /// The run's phases, in order.
+    pub phases: Vec<Phase<V::Objective>>,
+    /// The run folder.
+    pub folder: RunFolder,
+    /// Held until the run ends: a second run given the same folder is refused meanwhile.
+    pub lock: RunLock,
+}
+
+/// Everything [`train`] does before its first step, exactly as it does it: what tests compare
+/// a step of on two backends, with the run's own initial parameters, paintings' loss and
+/// phases.
+pub fn prepare<V: Variant>(
+    cfg: &V::Config,
+    vgg: Option<Vgg>,
+    device: &Device,
+    opts: &TrainOptions,
+) -> Result<Prepared<V>> {
     let kind = V::kind(cfg)?;
     let mut cfg = cfg.clone();
     let start = match kind {
@@ -107,13 +148,16 @@ pub fn train<V: Variant>(
     };
     let s = V::style(&cfg);
     let weights = LossWeights::or_defaults(preprocess, s.loss(), s.content_weight, s.style_weight);
-    let mut task = V::task(&cfg, start, style, &folder, &ad)?;
+    let task = V::task(&cfg, start, style, &folder, &ad)?;
     let phases = V::phases(&cfg, kind, weights);
-    let outcome = Trainer::new(phases, opts).run(&mut task, model)?;
-    if outcome.finished {
-        V::final_report(&outcome.model, &task, &cfg, &folder, device)?;
-    }
-    Ok(outcome)
+    Ok(Prepared {
+        cfg,
+        model,
+        task,
+        phases,
+        folder,
+        lock: _lock,
+    })
 }
 
 /// Colours of the training photos sampled for colour transfer.

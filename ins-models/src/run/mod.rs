@@ -15,5 +15,5 @@ pub mod scene_frame;
 pub mod variant;
 
 pub use args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};
-pub use lifecycle::{Run, train};
+pub use lifecycle::{Prepared, Run, prepare, train};
 pub use variant::{Start, Variant};
