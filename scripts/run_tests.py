@@ -27,11 +27,14 @@ import time
 # starting them first keeps the last minutes from being one long program alone. Measured one
 # after another (`cargo test`) on an AVX2-only EPYC: wgpu_cli 691 s, vgg_import 435 s,
 # backends 298 s, capture_cli 198 s, report_cli 119 s, viewer_cli 113 s, nerf 106 s, idr 82 s;
-# then siren and nerf_cli (about 50 s each) before the many short ones.
+# then siren and nerf_cli (about 50 s each) before the many short ones. wgpu_steps (785 s alone
+# with empty caches) starts after backends: by then lavapipe has compiled most of its kernels
+# for wgpu_cli (the same small NeRF and IDR) and for backends (the same VGG sizes).
 SLOWEST_FIRST = [
     "wgpu_cli",
     "vgg_import",
     "backends",
+    "wgpu_steps",
     "capture_cli",
     "report_cli",
     "viewer_cli",
