@@ -62,8 +62,10 @@ impl GpuRuntime {
         };
         let slow = match self.adapter.kind {
             AdapterKind::Software => {
-                " (a software adapter: minutes the first time, and every step is slow; \
-                 --backend flex is faster on this machine)"
+                " (a software adapter: minutes the first time, and every step is slow; on \
+                 Mesa's lavapipe a shader's loops also stop after 65,535 passes, so a sum over \
+                 more values than that, as in a NeRF step at the default sizes, comes out \
+                 short; --backend flex is faster, and exact, on this machine)"
             }
             AdapterKind::Hardware => "",
         };
