@@ -5,6 +5,7 @@
 
 mod common;
 
+use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -17,6 +18,8 @@ use common::{assert_clean_failure, s, stderr};
 const WGPU_LIMIT: Duration = Duration::from_secs(1800);
 
 /// Runs `ins-cli args…` with `env`, failing the test (not hanging the suite) after `limit`.
+/// Its output is read while it runs, so a child that prints more than a pipe holds never
+/// waits on the test.
 fn cli_within(args: &[&str], env: &[(&str, &Path)], limit: Duration) -> Output {
     let mut c = Command::new(env!("CARGO_BIN_EXE_ins-cli"));
     c.args(args)
@@ -27,24 +30,43 @@ fn cli_within(args: &[&str], env: &[(&str, &Path)], limit: Duration) -> Output {
         c.env(k, v);
     }
     let mut child = c.spawn().expect("running ins-cli");
+    let drain = |mut pipe: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            pipe.read_to_end(&mut bytes).ok();
+            bytes
+        })
+    };
+    let stdout = drain(Box::new(child.stdout.take().unwrap()));
+    let stderr = drain(Box::new(child.stderr.take().unwrap()));
     let started = Instant::now();
-    while child.try_wait().unwrap().is_none() {
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
         if started.elapsed() > limit {
             child.kill().ok();
             panic!("ins-cli {args:?} did not end within {limit:?}");
         }
         std::thread::sleep(Duration::from_millis(50));
+    };
+    Output {
+        status,
+        stdout: stdout.join().unwrap(),
+        stderr: stderr.join().unwrap(),
     }
-    child.wait_with_output().unwrap()
 }
 
-/// The loss logged at the last step of a run folder.
-fn last_loss(run: &Path) -> f64 {
+/// The losses a run folder logged, step and value, in order.
+fn logged_losses(run: &Path) -> Vec<(u64, f64)> {
     let text = std::fs::read_to_string(run.join("metrics.jsonl")).unwrap();
-    text.lines()
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["loss"].as_f64())
-        .last()
-        .unwrap_or_else(|| panic!("no loss logged in {}", run.display()))
+    let losses: Vec<(u64, f64)> = text
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter_map(|v| Some((v["step"].as_u64()?, v["loss"].as_f64()?)))
+        .collect();
+    assert!(!losses.is_empty(), "no loss logged in {}", run.display());
+    losses
 }
 
 #[test]
@@ -53,7 +75,7 @@ fn nerf_trains_on_wgpu_as_on_flex() {
     let scene = common::synth_scene(dir.path(), "blender", 32, 8);
     // The first wgpu run of a fresh machine compiles and tunes every kernel (minutes on
     // lavapipe); the limit fails the test rather than hanging CI.
-    let losses = last_losses_on_flex_and_wgpu(
+    let [flex, wgpu] = losses_on_flex_and_wgpu(
         dir.path(),
         &[
             "train",
@@ -61,7 +83,7 @@ fn nerf_trains_on_wgpu_as_on_flex() {
             "--scene",
             s(&scene),
             "--steps",
-            "10",
+            "20",
             "--eval-every",
             "0",
             "--eval-views",
@@ -77,14 +99,17 @@ fn nerf_trains_on_wgpu_as_on_flex() {
         ],
     );
     // The same initial parameters (drawn on the CPU for every backend) and the same rays: only
-    // the order of floating-point sums differs.
-    let rel = (losses[1] - losses[0]).abs() / losses[0];
-    assert!(
-        rel < 1e-3,
-        "loss at step 9: {} on wgpu, {} on flex",
-        losses[1],
-        losses[0]
+    // the order of floating-point sums differs. The losses logged (steps 9 and 19) follow
+    // flex's.
+    assert_eq!(
+        flex.iter().map(|l| l.0).collect::<Vec<_>>(),
+        wgpu.iter().map(|l| l.0).collect::<Vec<_>>()
     );
+    assert!(flex.len() >= 2, "logged steps: {flex:?}");
+    for ((step, f), (_, w)) in flex.iter().zip(&wgpu) {
+        let rel = (w - f).abs() / f;
+        assert!(rel < 1e-3, "loss at step {step}: {w} on wgpu, {f} on flex");
+    }
 }
 
 #[test]
@@ -96,7 +121,7 @@ fn idr_trains_on_wgpu_as_on_flex() {
     // loss logged at the last one follows two updates. (Over more steps a ray grazing the
     // silhouette can flip between hit and miss on the two backends' roundings: at step 9 of a
     // 10-step run here, one ray of 256 did, and the loss differed by 0.5 %.)
-    let losses = last_losses_on_flex_and_wgpu(
+    let [flex, wgpu] = losses_on_flex_and_wgpu(
         dir.path(),
         &[
             "train",
@@ -113,25 +138,27 @@ fn idr_trains_on_wgpu_as_on_flex() {
             "0",
         ],
     );
-    let rel = (losses[1] - losses[0]).abs() / losses[0];
+    let (f, w) = (flex.last().unwrap(), wgpu.last().unwrap());
+    assert_eq!((f.0, w.0), (2, 2), "the last step logged");
+    let rel = (w.1 - f.1).abs() / f.1;
     assert!(
         rel < 1e-3,
         "IDR loss at step 2: {} on wgpu, {} on flex",
-        losses[1],
-        losses[0]
+        w.1,
+        f.1
     );
 }
 
 /// Runs `args` with `--backend flex`, then `--backend wgpu` (each into its own run folder in
-/// `dir`, under [`WGPU_LIMIT`]), and returns the losses logged at the last step.
-fn last_losses_on_flex_and_wgpu(dir: &Path, args: &[&str]) -> [f64; 2] {
+/// `dir`, under [`WGPU_LIMIT`]), and returns the losses each logged.
+fn losses_on_flex_and_wgpu(dir: &Path, args: &[&str]) -> [Vec<(u64, f64)>; 2] {
     ["flex", "wgpu"].map(|backend| {
         let run = dir.join(backend);
         let mut all = args.to_vec();
         all.extend(["--backend", backend, "--quiet", "--out", s(&run)]);
         let o = cli_within(&all, &[], WGPU_LIMIT);
         assert!(o.status.success(), "{args:?} on {backend}: {}", stderr(&o));
-        last_loss(&run)
+        logged_losses(&run)
     })
 }
 
