@@ -511,7 +511,7 @@ fn evaluate<T: Task>(
 
 /// A task must return only the terms it declares for the objective.
 fn check_declared<O>(
-    terms: &super::task::LossTerms,
+    terms: &LossTerms,
     phase: &Phase<O>,
     declared: &[&str],
 ) -> Result<(), TrainError> {

@@ -98,7 +98,7 @@ pub fn prepare<V: Variant>(
     let styles = load_styles(&V::style(&cfg).styles)?;
 
     let folder = RunFolder::new(&opts.out_dir);
-    let _lock = folder.lock()?;
+    let lock = folder.lock()?;
     if !opts.resume && folder.checkpoints().is_started() {
         return Err(TrainError::RunExists {
             dir: folder.dir().to_path_buf(),
@@ -156,7 +156,7 @@ pub fn prepare<V: Variant>(
         task,
         phases,
         folder,
-        lock: _lock,
+        lock,
     })
 }
 
