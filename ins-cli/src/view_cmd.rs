@@ -36,6 +36,9 @@ pub struct View {
     /// Stop after this many seconds (for scripts; default: run until interrupted).
     #[arg(long)]
     timeout: Option<u64>,
+    /// Print a line per request on stderr: method, path, status, milliseconds.
+    #[arg(long)]
+    log: bool,
     #[command(flatten)]
     device: DeviceArgs,
 }
@@ -87,6 +90,7 @@ pub fn run(a: View) -> Result<()> {
         dir: a.run.clone(),
         device,
         latest,
+        log: a.log,
     };
     loop {
         let rq = match deadline {
@@ -106,6 +110,7 @@ struct Viewer {
     dir: PathBuf,
     device: Device,
     latest: Arc<AtomicU64>,
+    log: bool,
 }
 
 type Reply = Response<std::io::Cursor<Vec<u8>>>;
@@ -148,7 +153,16 @@ impl Viewer {
             (Method::Get, p) if p.starts_with("/files/") => self.file(&p["/files/".len()..]),
             _ => error_reply(404, &format!("no such page: {path}")),
         };
-        let _ = rq.respond(reply);
+        let status = reply.status_code().0;
+        let method = rq.method().to_string();
+        let sent = rq.respond(reply);
+        if self.log {
+            let ms = started.elapsed().as_secs_f64() * 1e3;
+            match sent {
+                Ok(()) => eprintln!("{method} {url} {status} {ms:.0} ms"),
+                Err(e) => eprintln!("{method} {url} {status} {ms:.0} ms, not sent: {e}"),
+            }
+        }
     }
 
     fn request(&self, url: &str) -> Result<ViewRequest> {

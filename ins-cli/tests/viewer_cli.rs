@@ -33,6 +33,8 @@ fn start_viewer(run: &Path, port: &str) -> Viewer {
             "900",
             "--backend",
             "flex",
+            // Each request on stderr, in the test's output should it fail.
+            "--log",
         ])
         .env("INS_NO_GPU", "1")
         .stdout(Stdio::piped())

@@ -13,9 +13,13 @@ const browser = await chromium.launch({
   args: ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync"],
 });
+// Waits poll on a timer. Playwright's default polls in requestAnimationFrame, which headless
+// Chromium can starve while other tests load the machine (one CI run timed out in such a wait).
+const POLL = { polling: 100 };
 const result = {};
+let page = null;
 try {
-  const page = await browser.newPage({ viewport: { width: 900, height: 600 } });
+  page = await browser.newPage({ viewport: { width: 900, height: 600 } });
   page.setDefaultTimeout(120_000);
   const errors = [];
   page.on("pageerror", (e) => errors.push(e.message));
@@ -33,7 +37,7 @@ try {
     await page.waitForFunction((prev) => {
       const img = document.getElementById("view");
       return img.dataset.rendered && img.dataset.rendered.startsWith("refined") && img.src !== prev && img.complete;
-    }, previousSrc);
+    }, previousSrc, POLL);
     return page.evaluate(() => document.getElementById("view").src);
   };
   // The share of pixels whose colour moved by more than 8/255 in some channel.
@@ -47,12 +51,22 @@ try {
   const shot = async (name) => { if (shots) await page.locator("#view").screenshot({ path: `${shots}/${name}.png` }); };
 
   let t = Date.now();
+  result.step = "first picture";
   await page.goto(url);
-  await page.waitForFunction(() => (document.getElementById("view").dataset.rendered || "").startsWith("coarse"));
+  await page.waitForFunction(() => {
+    const img = document.getElementById("view");
+    return (img.dataset.rendered || "").startsWith("coarse") && img.complete;
+  }, undefined, POLL);
   result.first_coarse_ms = Date.now() - t;
+  const coarseBox = await page.locator("#view").boundingBox();
   let src = await refined("");
   result.first_refined_ms = Date.now() - t;
+  // The picture keeps its place and size on screen when the refined one replaces the coarse.
+  const refinedBox = await page.locator("#view").boundingBox();
+  result.box_moved_px = Math.max(...["x", "y", "width", "height"].map((k) => Math.abs(coarseBox[k] - refinedBox[k])));
+  if (!(result.box_moved_px <= 1)) throw new Error(`the picture jumped on screen when refined (${JSON.stringify([coarseBox, refinedBox])})`);
   // Refine at 200 px from here on (the test's scene is small).
+  result.step = "refined size 200";
   await page.locator("#quality").selectOption("200");
   src = await refined(src);
   const before = await pixels();
@@ -62,6 +76,7 @@ try {
   const box = await page.locator("#view").boundingBox();
   const cx = box.x + box.width / 2, cy = box.y + box.height / 2;
   t = Date.now();
+  result.step = "drag";
   await page.mouse.move(cx, cy);
   await page.mouse.down();
   await page.mouse.move(cx + 150, cy + 20, { steps: 5 });
@@ -79,6 +94,7 @@ try {
   result.sliders = sliders;
   if (sliders < 2) throw new Error(`expected a slider per style, found ${sliders}`);
   t = Date.now();
+  result.step = "style slider";
   await page.locator("#mix-0").fill("0");
   await page.locator("#mix-1").fill("100");
   src = await refined(src);
@@ -90,6 +106,7 @@ try {
 
   // Depth and normals toggles give other pictures.
   for (const m of ["depth", "normals", "silhouette"]) {
+    result.step = `mode ${m}`;
     await page.locator(`#mode-${m}`).check();
     src = await refined(src);
     result[`${m}_change`] = changed(restyled, await pixels());
@@ -99,15 +116,24 @@ try {
   src = await refined(src);
 
   // Save at a chosen size.
+  result.step = "save";
   await page.locator("#save-size").fill("64x48");
   await page.locator("#save").click();
-  await page.waitForFunction(() => document.getElementById("saved").dataset.path);
+  await page.waitForFunction(() => document.getElementById("saved").dataset.path, undefined, POLL);
   result.saved = await page.evaluate(() => document.getElementById("saved").dataset.path);
   result.command = await page.evaluate(() => (document.querySelector("#saved code") || {}).textContent || null);
   if (errors.length) throw new Error("page errors: " + errors.join("; "));
+  delete result.step;
   console.log(JSON.stringify(result));
 } catch (e) {
-  console.log(JSON.stringify({ ...result, error: String(e && e.message || e) }));
+  // What the page showed when the step failed: its status line and the picture's label.
+  const page_state = page && await page.evaluate(() => ({
+    status: document.getElementById("status").textContent,
+    rendered: document.getElementById("view").dataset.rendered || null,
+    natural: [document.getElementById("view").naturalWidth, document.getElementById("view").naturalHeight],
+    complete: document.getElementById("view").complete,
+  })).catch((err) => String(err));
+  console.log(JSON.stringify({ ...result, error: String(e && e.message || e), page_state }));
   process.exitCode = 1;
 } finally {
   await browser.close();
