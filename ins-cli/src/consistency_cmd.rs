@@ -21,6 +21,7 @@ use serde_json::json;
 use vgg_import::Vgg;
 
 use crate::common::{DeviceArgs, parse_size};
+use crate::counter::Counter;
 use crate::stylize2d_cmd::{FrameRun, stylize_frames};
 use crate::vgg_cmd::VggArgs;
 use crate::video::{FrameOutput, write_frames};
@@ -181,14 +182,12 @@ pub fn run(a: EvalConsistency) -> Result<()> {
         a.run.display()
     );
     let render_started = std::time::Instant::now();
+    let mut counter = Counter::new("rendered", a.frames);
     let renders = PathRenders::render(&pair, cameras, code, &device, |i| {
         if !a.quiet {
-            eprint!("\rrendered {i}/{}", a.frames);
+            counter.done(i);
         }
     })?;
-    if !a.quiet {
-        eprintln!();
-    }
     let render_seconds = render_started.elapsed().as_secs_f64();
     let geometry = renders.geometry();
     let pretrained: Vec<RgbImage> = renders.pretrained.iter().map(|r| r.image.clone()).collect();

@@ -15,6 +15,7 @@ use ins_scene::camera::Camera;
 use ins_scene::paths::{PathKind, path_for_scene};
 
 use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
+use crate::counter::Counter;
 use crate::vgg_cmd::VggArgs;
 use crate::video::{FrameOutput, write_frames};
 
@@ -135,11 +136,11 @@ pub fn render(a: RenderIdr) -> Result<()> {
         path_for_scene(&run.scene(), a.path, a.frames).context("the scene has no cameras")?;
     let output = FrameOutput::for_path(&a.out)?;
     let mut frames = Vec::new();
+    let mut counter = Counter::new("rendered", cameras.len());
     for (i, c) in cameras.iter().enumerate() {
         frames.push(shoot(c)?);
-        eprint!("\rrendered {}/{}", i + 1, cameras.len());
+        counter.done(i + 1);
     }
-    eprintln!();
     let names: Vec<String> = (0..frames.len())
         .map(|i| format!("frame_{i:04}.png"))
         .collect();

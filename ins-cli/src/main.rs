@@ -4,6 +4,7 @@
 mod bench;
 mod common;
 mod consistency_cmd;
+mod counter;
 mod data_cmd;
 mod export_cmd;
 mod idr_cmd;

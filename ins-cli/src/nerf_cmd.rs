@@ -15,6 +15,7 @@ use ins_scene::data::Split;
 use ins_scene::paths::{PathKind, path_for_scene};
 
 use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
+use crate::counter::Counter;
 use crate::vgg_cmd::VggArgs;
 use crate::video::{FrameOutput, write_frames};
 
@@ -175,11 +176,11 @@ pub fn render(a: RenderNerf) -> Result<()> {
     };
     let output = FrameOutput::for_path(&a.out)?;
     let mut frames = Vec::with_capacity(cameras.len());
+    let mut counter = Counter::new("rendered", cameras.len());
     for (i, cam) in cameras.iter().enumerate() {
         frames.push(shoot(cam)?);
-        eprint!("\rrendered {}/{}", i + 1, cameras.len());
+        counter.done(i + 1);
     }
-    eprintln!();
     let written = write_frames(&frames, &names, &output, 12)?;
     for w in written {
         println!("{}", w.display());

@@ -16,6 +16,7 @@ use serde_json::json;
 use tiny_http::{Header, Method, Request, Response, Server};
 
 use crate::common::DeviceArgs;
+use crate::counter::Counter;
 use crate::viewer::source::{Mode, Source, ViewRequest};
 
 const PAGE: &str = include_str!("viewer/index.html");
@@ -332,12 +333,12 @@ impl Viewer {
                 &self.device,
             )?;
             let mut pictures = Vec::with_capacity(cams.len());
+            let mut counter = Counter::new("turntable", cams.len());
             for (i, c) in cams.iter().enumerate() {
                 let cam = c.resized(req.width, req.height);
                 pictures.push(run.frame(&cam, code.clone(), &self.device)?.image);
-                eprint!("\rturntable {}/{}", i + 1, cams.len());
+                counter.done(i + 1);
             }
-            eprintln!();
             let name = format!("turntable-{}.gif", Self::mix_tag(&req));
             let out = self.view_dir()?.join(&name);
             crate::video::write_frames(
