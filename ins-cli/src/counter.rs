@@ -29,16 +29,17 @@ impl Counter {
             if done >= total {
                 eprintln!();
             }
-        } else if let Some(tenths) = self.line_due(done) {
-            self.tenths_shown = tenths;
+        } else if self.log_line_due(done) {
             eprintln!("{what} {done}/{total}");
         }
     }
 
-    /// In a log: the tenths reached when `done` passes a new tenth of the way (or ends it).
-    fn line_due(&self, done: usize) -> Option<usize> {
+    /// In a log: whether `done` passes a new tenth of the way or ends it (and notes the tenth).
+    fn log_line_due(&mut self, done: usize) -> bool {
         let tenths = (done * 10).checked_div(self.total).unwrap_or(10);
-        (tenths > self.tenths_shown || done >= self.total).then_some(tenths.max(self.tenths_shown))
+        let due = tenths > self.tenths_shown || done >= self.total;
+        self.tenths_shown = self.tenths_shown.max(tenths);
+        due
     }
 }
 
@@ -53,15 +54,7 @@ mod tests {
             terminal: false,
             tenths_shown: 0,
         };
-        (1..=total)
-            .filter(|&d| {
-                let due = c.line_due(d);
-                if let Some(t) = due {
-                    c.tenths_shown = t;
-                }
-                due.is_some()
-            })
-            .collect()
+        (1..=total).filter(|&d| c.log_line_due(d)).collect()
     }
 
     #[test]

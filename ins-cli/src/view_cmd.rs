@@ -37,7 +37,7 @@ pub struct View {
     /// Stop after this many seconds (for scripts; default: run until interrupted).
     #[arg(long)]
     timeout: Option<u64>,
-    /// Print a line per request on stderr: method, path, status, milliseconds.
+    /// Print a line per request on stderr: method, URL, status, milliseconds.
     #[arg(long)]
     log: bool,
     #[command(flatten)]

@@ -127,12 +127,15 @@ try {
   console.log(JSON.stringify(result));
 } catch (e) {
   // What the page showed when the step failed: its status line and the picture's label.
-  const page_state = page && await page.evaluate(() => ({
-    status: document.getElementById("status").textContent,
-    rendered: document.getElementById("view").dataset.rendered || null,
-    natural: [document.getElementById("view").naturalWidth, document.getElementById("view").naturalHeight],
-    complete: document.getElementById("view").complete,
-  })).catch((err) => String(err));
+  const page_state = page && await page.evaluate(() => {
+    const img = document.getElementById("view");
+    return {
+      status: document.getElementById("status").textContent,
+      rendered: img.dataset.rendered || null,
+      natural: [img.naturalWidth, img.naturalHeight],
+      complete: img.complete,
+    };
+  }).catch((err) => String(err));
   console.log(JSON.stringify({ ...result, error: String(e && e.message || e), page_state }));
   process.exitCode = 1;
 } finally {
