@@ -5,7 +5,7 @@
 
 use burn::prelude::*;
 use ins_core::backend::BackendChoice;
-use ins_core::modules::hash_grid::{GridShape, op, reference};
+use ins_core::kernels::hash_grid::{GridShape, op, reference};
 use ins_tests::{max_rel_diff, values};
 
 fn shape() -> GridShape {

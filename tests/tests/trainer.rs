@@ -19,9 +19,8 @@ struct Toy {
 }
 
 impl Optimizable for Toy {
-    fn groups(&self) -> &'static [GroupSpec] {
-        const GROUPS: &[GroupSpec] = &[GroupSpec::new("a", &["a"]), GroupSpec::new("b", &["b"])];
-        GROUPS
+    fn groups(&self) -> Vec<GroupSpec> {
+        vec![GroupSpec::new("a", &["a"]), GroupSpec::new("b", &["b"])]
     }
 }
 

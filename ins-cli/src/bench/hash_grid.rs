@@ -8,7 +8,8 @@
 use anyhow::{Result, bail};
 use burn::prelude::*;
 use burn::tensor::Distribution;
-use ins_core::modules::hash_grid::{HashGridConfig, op, reference};
+use ins_core::kernels::hash_grid::{op, reference};
+use ins_core::modules::hash_grid::HashGridConfig;
 
 use super::{Timing, timed};
 

@@ -6,7 +6,6 @@
 
 pub mod color_transfer;
 pub mod gram;
-pub mod gram_op;
 pub mod perceptual;
 pub mod pixel;
 pub mod saturation;
@@ -15,10 +14,10 @@ pub mod style;
 pub mod weights;
 
 pub use color_transfer::ColorTransfer;
-pub use gram::gram;
+pub use gram::{StyleTarget, gram, style_distance, style_loss};
 pub use perceptual::{
-    ContentTarget, PerceptualLoss, StyleTarget, content_distance, content_loss, one_hot_codes,
-    patch_images, photo_patch, style_distance, style_loss,
+    ContentTarget, PerceptualLoss, content_distance, content_loss, one_hot_codes, patch_images,
+    photo_patch,
 };
 pub use pixel::{mse, psnr};
 pub use ssim::ssim;

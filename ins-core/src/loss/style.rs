@@ -182,7 +182,7 @@ impl StyleTargets {
     /// restricts NNFM's matches; the other kinds ignore it.
     pub fn loss(&self, features: &VggFeatures, guide: Option<&MatchGuide>) -> Tensor<1> {
         match self {
-            StyleTargets::Gram(grams) => super::perceptual::style_loss(features, grams),
+            StyleTargets::Gram(grams) => super::gram::style_loss(features, grams),
             StyleTargets::Nnfm(paintings) => {
                 let layers = features.style_layers();
                 let mut total: Option<Tensor<1>> = None;

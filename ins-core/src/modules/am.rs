@@ -9,7 +9,7 @@ use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
-use super::dense_op::dense;
+use crate::kernels::dense::dense;
 
 /// Configuration of an [`Amalgamation`].
 #[derive(Config, Debug)]

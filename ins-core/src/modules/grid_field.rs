@@ -5,8 +5,8 @@ use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
-use super::dense_op::dense;
 use super::hash_grid::{HashGrid, HashGridConfig};
+use crate::kernels::dense::dense;
 
 /// Configuration of a [`GridGeometry`].
 #[derive(Config, Debug)]

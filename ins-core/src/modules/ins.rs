@@ -75,13 +75,12 @@ impl<C: ContentModule> Ins<C> {
 
 impl<C: ContentModule> Optimizable for Ins<C> {
     /// The RGB head is its own group, so freezing the amalgamation leaves colour trainable.
-    fn groups(&self) -> &'static [GroupSpec] {
-        const GROUPS: &[GroupSpec] = &[
+    fn groups(&self) -> Vec<GroupSpec> {
+        vec![
             GroupSpec::new("sim", &["sim"]),
             GroupSpec::new("cim", &["cim"]),
             GroupSpec::new("am", &["am"]),
             GroupSpec::new("head", &["head"]),
-        ];
-        GROUPS
+        ]
     }
 }

@@ -4,7 +4,7 @@ use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
 
-use super::dense_op::dense;
+use crate::kernels::dense::dense;
 
 /// Configuration of a [`ReluMlp`].
 #[derive(Config, Debug)]

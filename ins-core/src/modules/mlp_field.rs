@@ -4,9 +4,9 @@
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 
-use super::dense_op::dense;
 use super::encoding::FourierEncoding;
 use super::mlp::{ReluMlp, ReluMlpConfig};
+use crate::kernels::dense::dense;
 
 /// Configuration of a [`MlpGeometry`].
 #[derive(Config, Debug)]

@@ -14,7 +14,6 @@
 pub mod am;
 pub mod cim;
 pub mod color_head;
-pub mod dense_op;
 pub mod encoding;
 pub mod field;
 pub mod grid_field;
@@ -27,7 +26,5 @@ pub mod sdf;
 pub mod sh;
 pub mod sim;
 pub mod sine;
-pub mod sine_op;
-pub mod softplus_op;
 pub mod style_position;
 pub mod surface_color;

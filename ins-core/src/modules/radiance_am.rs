@@ -5,7 +5,7 @@
 //!
 //! with λ and γ learnable and starting at 1, so the stylized field starts as the pretrained one.
 
-use super::dense_op::dense;
+use crate::kernels::dense::dense;
 use burn::module::Param;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;

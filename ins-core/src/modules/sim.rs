@@ -3,7 +3,7 @@
 //! As in the authors' NeRF code the code can be concatenated at every layer and an encoded
 //! position can enter at layer 2, so that style features may vary over space.
 
-use super::dense_op::dense;
+use crate::kernels::dense::dense;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;

@@ -69,7 +69,7 @@ impl SineLayerConfig {
 impl SineLayer {
     /// `[N, d_in] → [N, d_out]`.
     pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
-        super::sine_op::scaled_sin(super::dense_op::dense(&self.linear, x), self.omega0)
+        crate::kernels::sine::scaled_sin(crate::kernels::dense::dense(&self.linear, x), self.omega0)
     }
 }
 

@@ -45,7 +45,7 @@ impl GroupSpec {
 pub trait Optimizable: Module + Sized {
     /// The groups, in a fixed order. Every trainable parameter must be in exactly one. A model
     /// whose parts are optional lists only the parts it has.
-    fn groups(&self) -> &'static [GroupSpec];
+    fn groups(&self) -> Vec<GroupSpec>;
 }
 
 /// Learning-rate multiplier and freezing of one group, as configured per phase.
@@ -239,9 +239,8 @@ mod tests {
                 inner: Two,
             }
             impl Optimizable for $name {
-                fn groups(&self) -> &'static [GroupSpec] {
-                    const GROUPS: &[GroupSpec] = $groups;
-                    GROUPS
+                fn groups(&self) -> Vec<GroupSpec> {
+                    $groups.to_vec()
                 }
             }
         };

@@ -4,7 +4,6 @@
 pub mod checkpoint;
 pub mod error;
 pub mod folder;
-pub mod fused_adam;
 pub mod groups;
 pub mod guard;
 pub mod metrics;

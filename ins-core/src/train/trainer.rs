@@ -14,7 +14,6 @@ use serde::{Deserialize, Serialize};
 use super::checkpoint::{Checkpoint, CheckpointStore, load_module_bytes, module_bytes};
 use super::error::TrainError;
 use super::folder::RunFolder;
-use super::fused_adam::FusedAdam;
 use super::groups::ParamGroups;
 use super::guard::StepValues;
 use super::metrics::MetricsLog;
@@ -23,6 +22,7 @@ use super::plot::plot_history;
 use super::progress::{FirstStep, Progress};
 use super::task::{LossTerms, StepContext, Task};
 use super::watch::ProbeWatch;
+use crate::kernels::adam::FusedAdam;
 
 /// Run-level options.
 #[derive(Debug, Clone)]

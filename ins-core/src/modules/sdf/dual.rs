@@ -5,9 +5,9 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use super::BETA;
-use crate::modules::dense_op::dense;
+use crate::kernels::dense::dense;
+use crate::kernels::softplus::{softplus, softplus_slope};
 use crate::modules::encoding::FourierEncoding;
-use crate::modules::softplus_op::{softplus, softplus_slope};
 
 /// Value and forward-mode tangents of a layer stack: `h [N, D]`, `t [3N, D]` (the three
 /// tangents stacked along rows, tangent k in rows `kN..(k+1)N`).

@@ -7,9 +7,9 @@ use super::dual::Dual;
 use super::{
     BETA, distance_and_features, distance_features_and_gradient, distance_head, linear_normal,
 };
-use crate::modules::dense_op::dense;
+use crate::kernels::dense::dense;
+use crate::kernels::softplus::softplus;
 use crate::modules::hash_grid::{HashGrid, HashGridConfig};
-use crate::modules::softplus_op::softplus;
 
 /// Configuration of an [`SdfGrid`].
 #[derive(Config, Debug)]

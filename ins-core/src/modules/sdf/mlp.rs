@@ -8,9 +8,9 @@ use super::{
     BETA, distance_and_features, distance_features_and_gradient, distance_head, linear_normal,
     zero_inputs,
 };
-use crate::modules::dense_op::dense;
+use crate::kernels::dense::dense;
+use crate::kernels::softplus::softplus;
 use crate::modules::encoding::FourierEncoding;
-use crate::modules::softplus_op::softplus;
 
 /// Configuration of an [`SdfMlp`].
 #[derive(Config, Debug)]

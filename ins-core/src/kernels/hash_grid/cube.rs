@@ -242,7 +242,7 @@ mod tests {
 
     use super::*;
     use crate::backend::BackendChoice;
-    use crate::modules::hash_grid::kernel;
+    use crate::kernels::hash_grid::kernel;
 
     /// Hashed levels with a table small enough that many points share rows.
     fn shape() -> GridShape {

@@ -149,12 +149,12 @@ macro_rules! vectorized {
                 fn avx2($($arg: $ty),*) {
                     $body($($arg),*)
                 }
-                match $crate::flex_kernels::Lanes::detect() {
+                match $crate::kernels::flex::Lanes::detect() {
                     // SAFETY: the CPU has AVX-512F (checked at run time).
-                    $crate::flex_kernels::Lanes::Avx512 => return unsafe { avx512($($arg),*) },
+                    $crate::kernels::flex::Lanes::Avx512 => return unsafe { avx512($($arg),*) },
                     // SAFETY: the CPU has AVX2 and FMA (checked at run time).
-                    $crate::flex_kernels::Lanes::Avx2 => return unsafe { avx2($($arg),*) },
-                    $crate::flex_kernels::Lanes::Baseline => {}
+                    $crate::kernels::flex::Lanes::Avx2 => return unsafe { avx2($($arg),*) },
+                    $crate::kernels::flex::Lanes::Baseline => {}
                 }
             }
             $body($($arg),*)

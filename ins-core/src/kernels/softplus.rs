@@ -21,7 +21,7 @@ use burn::backend::{
 };
 use burn::prelude::*;
 
-use crate::flex_kernels::{filled, on_flex};
+use crate::kernels::flex::{filled, on_flex};
 
 /// The kernels, on `a = βx`, through `e = e^{−|a|}` (never overflows):
 /// `softplus = max(a, 0) + log1p(e)`, `σ(a) = 1/(1+e)` for `a ≥ 0` and `e/(1+e)` below.
@@ -153,7 +153,7 @@ pub mod kernel {
         }
     }
 
-    crate::flex_kernels::vectorized! {
+    crate::kernels::flex::vectorized! {
         /// `out = map(x)` (times `g` where given).
         pub fn run(
             map: Map,

@@ -2,7 +2,7 @@
 //!
 //! Flex's matmul zero-fills and copies each output, and the layer adds its bias in another
 //! pass: about a tenth of a SIREN step went to `memset` and `memmove`. Here each result is
-//! written once, the bias first and the product accumulated onto it (`flex_kernels.rs`); the
+//! written once, the bias first and the product accumulated onto it (`super::flex`); the
 //! backward reads the operands through strides instead of transposed copies. Other backends
 //! keep Burn's `Linear` ([`dense`] picks).
 
@@ -21,7 +21,7 @@ use burn::backend::{
 use burn::nn::Linear;
 use burn::prelude::*;
 
-use crate::flex_kernels::{product, values as slice, written};
+use crate::kernels::flex::{product, values as slice, written};
 
 /// The dense layer and its gradients as backend operations (`W` in Burn's `[in, out]` layout).
 #[backend_extension(Flex, Autodiff)]

@@ -19,7 +19,7 @@ use burn::optim::{AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimize
 use burn::prelude::*;
 use rayon::prelude::*;
 
-use crate::flex_kernels::on_flex;
+use crate::kernels::flex::on_flex;
 
 /// Adam's constants (Kingma & Ba), no weight decay, no AMSGrad.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,7 +95,7 @@ pub mod kernel {
         }
     }
 
-    crate::flex_kernels::vectorized! {
+    crate::kernels::flex::vectorized! {
         /// The update.
         pub fn update(
             s: Step,

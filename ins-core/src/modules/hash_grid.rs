@@ -1,25 +1,13 @@
 //! Multiresolution hash encoding (instant-ngp): L levels of F learned features each, looked up
-//! by trilinear interpolation at geometrically growing resolutions.
-//!
-//! - [`kernel`]: the maths on slices (forward, both backwards, the spatial Jacobian).
-//! - [`cube`]: the same maths as CubeCL kernels for the GPU backends (device code in
-//!   `cube_kernels`).
-//! - [`op`]: a Burn op with a hand-written backward that runs the kernels on Flex and
-//!   the CubeCL backends.
-//! - [`reference`]: the same function from ordinary Burn ops (the tests' yardstick, and any
-//!   backend without the op).
-
-pub mod cube;
-mod cube_kernels;
-pub mod kernel;
-pub mod op;
-pub mod reference;
+//! by trilinear interpolation at geometrically growing resolutions. Its kernels (on slices, as
+//! CubeCL kernels, as a Burn op) are in [`crate::kernels::hash_grid`].
 
 use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
-pub use kernel::GridShape;
+pub use crate::kernels::hash_grid::GridShape;
+use crate::kernels::hash_grid::{op, reference};
 
 /// Configuration of a [`HashGrid`].
 #[derive(Config, Debug)]

@@ -17,7 +17,7 @@ use burn::backend::{
 };
 use burn::prelude::*;
 
-use crate::flex_kernels::{product, values, written};
+use crate::kernels::flex::{product, values, written};
 
 /// The Gram matrix and its gradient as backend operations.
 #[backend_extension(Flex, Autodiff)]

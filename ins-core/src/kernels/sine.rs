@@ -16,7 +16,7 @@ use burn::backend::{
 };
 use burn::prelude::*;
 
-use crate::flex_kernels::filled;
+use crate::kernels::flex::filled;
 
 /// The kernels: range reduction to `[-π, π]` (two-constant, exact for `|x|` below ~10⁵),
 /// then Taylor polynomials to degree 15 (sin) and 16 (cos): absolute error below 2·10⁻⁶.
@@ -81,7 +81,7 @@ pub mod kernel {
         }
     }
 
-    crate::flex_kernels::vectorized! {
+    crate::kernels::flex::vectorized! {
         /// `out = sin(ω·z)`.
         pub fn forward(
             z: &[f32],
@@ -90,7 +90,7 @@ pub mod kernel {
         ) = forward_loop;
     }
 
-    crate::flex_kernels::vectorized! {
+    crate::kernels::flex::vectorized! {
         /// `out = ω·cos(ω·z)·g`.
         pub fn backward(
             z: &[f32],

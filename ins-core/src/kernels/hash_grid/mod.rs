@@ -1,0 +1,17 @@
+//! The multiresolution hash encoding's maths (the module is `crate::modules::hash_grid`).
+//!
+//! - [`kernel`]: the maths on slices (forward, both backwards, the spatial Jacobian).
+//! - [`cube`]: the same maths as CubeCL kernels for the GPU backends (device code in
+//!   `cube_kernels`).
+//! - [`op`]: a Burn op with a hand-written backward that runs the kernels on Flex and
+//!   the CubeCL backends.
+//! - [`reference`]: the same function from ordinary Burn ops (the tests' yardstick, and any
+//!   backend without the op).
+
+pub mod cube;
+mod cube_kernels;
+pub mod kernel;
+pub mod op;
+pub mod reference;
+
+pub use kernel::GridShape;

@@ -1,0 +1,22 @@
+//! The hand-written kernels: every op of INS-rs that has its own backward, and the fused Adam
+//! step. Each runs plain Rust (rayon, `gemm`, AVX-512 / AVX2 through [`flex::vectorized`]) on
+//! Flex and, where the GPU needs one, a CubeCL kernel on wgpu; each is proven against the same
+//! function built from ordinary Burn ops (its tests, `tests/tests/hash_grid.rs`,
+//! `tests/tests/cpu_fallback.rs`). Why hand-written: Flex's generic ops copy, zero-fill and
+//! read transposes through copies, and autodiff keeps every intermediate; these write each
+//! result once (measured in docs/measurements.md).
+//!
+//! - [`flex`]: what the Flex kernels share (a strided GEMM, unzeroed outputs, lanes).
+//! - [`dense`]: the linear layer; [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
+//!   activation and its slope; [`gram`]: Gram matrices.
+//! - [`adam`]: Adam's step fused into one pass over each parameter.
+//! - [`hash_grid`]: the multiresolution hash encoding on slices, as CubeCL kernels, and as a
+//!   Burn op with both backwards.
+
+pub mod adam;
+pub mod dense;
+pub mod flex;
+pub mod gram;
+pub mod hash_grid;
+pub mod sine;
+pub mod softplus;
