@@ -229,6 +229,9 @@ fn check(
         if let Some(lens) = &s.lens {
             println!("lens     {lens}");
         }
+        for note in &s.notes {
+            println!("note     {note}");
+        }
         match s.bounds {
             Bounds::Sphere { center, radius } => {
                 println!("bounds   sphere centre {center:?} radius {radius}")

@@ -212,6 +212,24 @@ fn render_of_a_missing_run_is_a_clear_error() {
         "/tmp/x.png",
     ]);
     assert_clean_failure(&o, "/no/such/run");
+    // The design's old name for the CPU backend runs flex, saying so once.
+    let o = cli(&[
+        "export",
+        "mesh",
+        "--run",
+        "/no/such/run",
+        "--backend",
+        "ndarray",
+        "--out",
+        "/tmp/x.ply",
+    ]);
+    assert_clean_failure(&o, "/no/such/run");
+    assert_eq!(
+        stderr(&o).matches("running on flex").count(),
+        1,
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]

@@ -4,6 +4,10 @@
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// What `--backend ndarray` prints (once) before running on flex.
+pub const NDARRAY_NOTE: &str = "--backend ndarray: Burn 0.22 replaces its ndarray backend with \
+     flex, the faster CPU backend; running on flex";
+
 /// A backend choice as given on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
@@ -24,12 +28,14 @@ impl std::str::FromStr for BackendChoice {
             "auto" => Ok(Self::Auto),
             "flex" | "cpu" => Ok(Self::Flex),
             "wgpu" | "gpu" => Ok(Self::Wgpu),
-            // Built in until 2026-11: the largest crate of the build (ten minutes of compiling)
-            // for a CPU backend slower than flex (its convolution backward above all).
-            "ndarray" => Err(
-                "the ndarray backend is no longer built in: flex is the CPU backend (and faster)"
-                    .into(),
-            ),
+            // The design's first name for the CPU backend. Burn 0.22 deprecates ndarray for
+            // flex, and this build leaves it out (the largest crate of the build, ten minutes
+            // of compiling, for a backend slower than flex): run flex and say so.
+            "ndarray" => {
+                static TOLD: std::sync::Once = std::sync::Once::new();
+                TOLD.call_once(|| eprintln!("{NDARRAY_NOTE}"));
+                Ok(Self::Flex)
+            }
             _ => Err(format!(
                 "unknown backend {s:?} (expected auto, flex or wgpu)"
             )),
@@ -111,12 +117,9 @@ mod tests {
     }
 
     #[test]
-    fn the_dropped_ndarray_backend_points_to_flex() {
-        let e = "ndarray".parse::<BackendChoice>().unwrap_err();
-        assert!(
-            e.contains("no longer built in") && e.contains("flex"),
-            "{e}"
-        );
+    fn the_dropped_ndarray_backend_runs_flex() {
+        assert_eq!("ndarray".parse::<BackendChoice>(), Ok(BackendChoice::Flex));
+        assert!(super::NDARRAY_NOTE.contains("flex"));
         let e = "cuda".parse::<BackendChoice>().unwrap_err();
         assert!(
             e.contains("\"cuda\"") && e.contains("auto, flex or wgpu"),

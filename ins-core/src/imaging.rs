@@ -199,6 +199,25 @@ pub fn turbo(t: f32) -> [f32; 3] {
     ]
 }
 
+/// The depth of the pixels that see a surface (`None` elsewhere, shown white) as a picture,
+/// colour-mapped over the range they span.
+pub fn surface_depth_image(depth: &[Option<f32>], width: usize, height: usize) -> RgbImage {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for d in depth.iter().flatten() {
+        lo = lo.min(*d);
+        hi = hi.max(*d);
+    }
+    if !lo.is_finite() {
+        (lo, hi) = (0.0, 1.0);
+    }
+    let opacity: Vec<f32> = depth
+        .iter()
+        .map(|d| if d.is_some() { 1.0 } else { 0.0 })
+        .collect();
+    let d: Vec<f32> = depth.iter().map(|d| d.unwrap_or(0.0)).collect();
+    depth_image(&d, &opacity, width, height, lo, hi)
+}
+
 /// A depth map as a picture: `depth` divided by `opacity` where the opacity is above 0.5,
 /// mapped from `[near, far]` onto the turbo colours; transparent pixels are white.
 pub fn depth_image(

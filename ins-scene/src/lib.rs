@@ -18,4 +18,5 @@ pub mod mask_sampler;
 pub mod patches;
 pub mod paths;
 pub mod rays;
+pub mod stats;
 pub mod viewpoints;

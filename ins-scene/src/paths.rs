@@ -311,7 +311,11 @@ fn spiral_geometry(
     let dt = 0.75;
     let focal = 1.0 / ((1.0 - dt) / close + dt / inf);
     let rads: [f32; 3] = std::array::from_fn(|k| {
-        percentile(cameras.iter().map(|c| c.origin()[k].abs()).collect(), 90.0)
+        let distances = cameras
+            .iter()
+            .map(|c| f64::from(c.origin()[k].abs()))
+            .collect();
+        crate::stats::percentile_of(distances, 0.9) as f32
     });
     let rot = super::geometry::mat3_from_rows(avg.map(|r| [r[0], r[1], r[2]]));
     let center = Vec3::new(avg[0][3], avg[1][3], avg[2][3]);
@@ -367,11 +371,11 @@ pub fn default_kind(scene: &Scene) -> PathKind {
 /// The LLFF `poses_avg`: centre = mean position, back axis = normalized sum of back axes, up =
 /// sum of up axes, re-orthonormalized.
 pub fn average_pose(cameras: &[Camera]) -> [[f32; 4]; 3] {
-    let n = cameras.len().max(1) as f32;
-    let center = cameras.iter().map(|c| c.origin()).sum::<Vec3>() / n;
-    let back = -cameras.iter().map(|c| c.forward()).sum::<Vec3>();
-    let up = cameras.iter().map(|c| c.up()).sum::<Vec3>();
-    pose_from_back_up(back, up, center)
+    let poses: Vec<_> = cameras
+        .iter()
+        .map(|c| c.c2w.map(|r| r.map(f64::from)))
+        .collect();
+    crate::data::framing::average_pose(&poses).map(|r| r.map(|v| v as f32))
 }
 
 /// Smooth path through key cameras: `per_segment` frames from each key to the next (the key
@@ -422,17 +426,6 @@ pub fn plane_basis(up: Vec3) -> (Vec3, Vec3) {
 }
 
 /// Percentile with linear interpolation (NumPy's default).
-fn percentile(mut v: Vec<f32>, q: f32) -> f32 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let pos = q / 100.0 * (v.len() - 1) as f32;
-    let lo = pos.floor() as usize;
-    let hi = (lo + 1).min(v.len() - 1);
-    v[lo] + (v[hi] - v[lo]) * (pos - lo as f32)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

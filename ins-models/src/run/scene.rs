@@ -18,7 +18,8 @@ pub fn auto_downscale(width: u32, height: u32, long_side: u32) -> u32 {
 
 /// The scene in `path` at `downscale` (0: the factor that brings the longer side nearest
 /// [`DEFAULT_LONG_SIDE`]), its format and the factor used; `images` names a COLMAP
-/// workspace's photo folder. A scene without training views is an error naming the folder.
+/// workspace's photo folder. A scene without training views is an error naming the folder;
+/// the scene's notes (photos left out) are printed.
 pub fn load_scene(
     path: &Path,
     downscale: u32,
@@ -50,6 +51,9 @@ pub fn load_scene(
     )?;
     if scene.split(Split::Train).is_empty() {
         bail!("{}: the scene has no training views", path.display());
+    }
+    for note in &scene.notes {
+        eprintln!("note: {note}");
     }
     Ok((scene, format, factor))
 }

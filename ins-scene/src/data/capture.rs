@@ -221,6 +221,7 @@ pub fn build(
         white_background: false,
         forward_facing: framing.forward_facing,
         contraction: framing.contraction,
+        notes: Vec::new(),
     })
 }
 

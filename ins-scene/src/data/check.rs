@@ -56,6 +56,8 @@ pub struct Summary {
     pub edges: Option<String>,
     /// The first view's lens distortion, when it has one.
     pub lens: Option<String>,
+    /// What a user should know about how the folder was read ([`Scene::notes`]).
+    pub notes: Vec<String>,
 }
 
 /// One sanity check: how many items passed.
@@ -184,6 +186,7 @@ pub fn summarize(scene: &Scene) -> Summary {
         lens: first
             .filter(|c| !c.distortion.is_none())
             .map(|c| format!("{:?}", c.distortion)),
+        notes: scene.notes.clone(),
     }
 }
 

@@ -6,6 +6,7 @@
 //! The LLFF loader and the COLMAP / transforms.json loaders share the forward-facing frame, so a
 //! forward-facing capture read from COLMAP lands in the same frame as its `poses_bounds.npy`.
 
+use crate::stats::percentile;
 use glam::{DMat3, DQuat, DVec3};
 
 use super::scene::View;
@@ -183,13 +184,6 @@ pub fn depth_bounds(
             Some((percentile(&z, 0.001), percentile(&z, 0.999)))
         })
         .collect()
-}
-
-fn percentile(sorted: &[f64], q: f64) -> f64 {
-    let x = q * (sorted.len() - 1) as f64;
-    let (i, f) = (x.floor() as usize, x.fract());
-    let j = (i + 1).min(sorted.len() - 1);
-    sorted[i] * (1.0 - f) + sorted[j] * f
 }
 
 /// The frame of an object-centred capture: centred on the [`focus_point`] (the cameras' mean

@@ -21,6 +21,11 @@ pub const FILE: &str = "transforms.json";
 /// Extensions tried, in order, for a `file_path` written without one.
 const EXTENSIONS: [&str; 6] = ["png", "jpg", "jpeg", "PNG", "JPG", "JPEG"];
 
+/// Fewest photos a capture may keep when some its file names are missing: fewer cannot be
+/// trained and held out from (public captures are often shared without some of their photos,
+/// and a user would rather train on those present).
+pub const MIN_PRESENT: usize = 3;
+
 /// Reads the capture whose `transforms.json` is in `dir`.
 pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
     let path = dir.join(FILE);
@@ -46,15 +51,17 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         ),
     };
     let mut frames = Vec::with_capacity(frames_json.len());
+    let mut missing = Vec::new();
     for (i, f) in frames_json.iter().enumerate() {
         let err = |msg: String| DataError::json(&path, format!("frame {i}: {msg}"));
         let file = f
             .get("file_path")
             .and_then(Value::as_str)
             .ok_or_else(|| err("missing file_path".into()))?;
-        let image = resolve(dir, file).ok_or_else(|| {
-            DataError::missing(&dir.join(file), format!("the image of frame {i} in {FILE}"))
-        })?;
+        let Some(image) = resolve(dir, file) else {
+            missing.push(dir.join(file));
+            continue;
+        };
         let mask = match f.get("mask_path").and_then(Value::as_str) {
             None => None,
             Some(m) => Some(resolve(dir, m).ok_or_else(|| {
@@ -78,6 +85,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
             origin: format!("frame {i}"),
         });
     }
+    let notes = missing_photos(&path, frames_json.len(), frames.len(), &missing)?;
     // In file-name order, as nerfstudio's reader and the COLMAP reader list them (exporters
     // write frames in registration order), so the held-out views do not depend on it.
     frames.sort_by(|a, b| a.image.cmp(&b.image));
@@ -98,7 +106,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         }
         None => SparsePoints::default(),
     };
-    capture::build(
+    let mut scene = capture::build(
         SceneFormat::Transforms,
         dir,
         &path,
@@ -106,7 +114,39 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         &sparse,
         aabb_scale,
         opts,
-    )
+    )?;
+    scene.notes.extend(notes);
+    Ok(scene)
+}
+
+/// What to say of the photos `missing` among the `named` frames of `path`: nothing when all
+/// are there; a note naming how many are missing (and the first) when at least
+/// [`MIN_PRESENT`] remain; else an error naming the first missing photo.
+fn missing_photos(
+    path: &Path,
+    named: usize,
+    present: usize,
+    missing: &[PathBuf],
+) -> Result<Vec<String>, DataError> {
+    let Some(first) = missing.first() else {
+        return Ok(Vec::new());
+    };
+    if present < MIN_PRESENT {
+        return Err(DataError::missing(
+            first,
+            format!(
+                "{} of the {named} photos {FILE} names are missing, this one among them; \
+                 {present} remain, and a capture needs at least {MIN_PRESENT}",
+                missing.len()
+            ),
+        ));
+    }
+    Ok(vec![format!(
+        "{} of the {named} photos {} names are missing (the first: {}); training on the {present} present",
+        missing.len(),
+        path.display(),
+        first.display()
+    )])
 }
 
 /// The full-size resolution of the first frame, from `w`/`h` or the image's header, without
@@ -116,22 +156,30 @@ pub fn probe_resolution(dir: &Path) -> Result<(u32, u32), DataError> {
     let text = std::fs::read_to_string(&path).map_err(|e| DataError::io(&path, e))?;
     let json: Value =
         serde_json::from_str(&text).map_err(|e| DataError::json(&path, e.to_string()))?;
-    let first = json
+    let frames = json
         .get("frames")
         .and_then(Value::as_array)
-        .and_then(|f| f.first())
+        .filter(|f| !f.is_empty())
         .ok_or_else(|| DataError::json(&path, "missing frames array"))?;
+    // The first frame whose photo is there (photos may be missing: see `missing_photos`).
+    fn file_of(f: &Value) -> Option<&str> {
+        f.get("file_path").and_then(Value::as_str)
+    }
+    let Some((i, first, image)) = frames.iter().enumerate().find_map(|(i, f)| {
+        let image = resolve(dir, file_of(f)?)?;
+        Some((i, f, image))
+    }) else {
+        let file = file_of(&frames[0])
+            .ok_or_else(|| DataError::json(&path, "frame 0: missing file_path"))?;
+        return Err(DataError::missing(
+            &dir.join(file),
+            format!("the image of frame 0 in {FILE} (no photo it names is there)"),
+        ));
+    };
     let get = |key: &str| first.get(key).or_else(|| json.get(key));
-    let file = first
-        .get("file_path")
-        .and_then(Value::as_str)
-        .ok_or_else(|| DataError::json(&path, "frame 0: missing file_path"))?;
-    let image = resolve(dir, file).ok_or_else(|| {
-        DataError::missing(&dir.join(file), format!("the image of frame 0 in {FILE}"))
-    })?;
     intrinsics(&get, &image)
         .map(|lens| lens.0)
-        .map_err(|e| DataError::json(&path, format!("frame 0: {e}")))
+        .map_err(|e| DataError::json(&path, format!("frame {i}: {e}")))
 }
 
 type Lens = ((u32, u32), [f64; 4], Distortion);

@@ -176,6 +176,44 @@ fn transforms_frames_are_listed_by_file_name_whatever_their_order() {
 }
 
 #[test]
+fn photos_a_transforms_json_names_but_lacks_are_left_out_and_said() {
+    // Public captures are shared without some of their photos: train on those present, say
+    // how many are missing, and refuse only when too few remain.
+    let (d, _) = capture(
+        SceneFormat::Transforms,
+        CaptureLayout::ObjectCentred,
+        Encoding::Binary,
+    );
+    let json = d.path().join("transforms.json");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let frames = v["frames"].as_array_mut().unwrap();
+    let named = frames.len();
+    frames[0]["file_path"] = "images/nowhere.png".into();
+    frames[3]["file_path"] = "images/lost".into();
+    std::fs::write(&json, v.to_string()).unwrap();
+    let scene = load(d.path());
+    assert_eq!(scene.views.len(), named - 2);
+    assert_eq!(scene.notes.len(), 1, "{:?}", scene.notes);
+    let note = &scene.notes[0];
+    assert!(
+        note.contains(&format!("2 of the {named} photos"))
+            && note.contains("nowhere.png")
+            && note.contains(&format!("training on the {} present", named - 2)),
+        "{note}"
+    );
+    // Every photo but one missing: too few to train on, an error naming a missing one.
+    let frames = v["frames"].as_array_mut().unwrap();
+    for f in frames.iter_mut().skip(2) {
+        f["file_path"] = "images/nowhere.png".into();
+    }
+    std::fs::write(&json, v.to_string()).unwrap();
+    let e = load_err(d.path());
+    assert_names(&e, "nowhere.png");
+    assert_names(&e, "at least 3");
+}
+
+#[test]
 fn forward_captures_frame_like_llff() {
     // The sparse points give the depth bounds: the nearest maps to 1/0.75, as LLFF's does.
     let (dir, synth) = capture(
@@ -363,10 +401,6 @@ fn bad_transforms_inputs_are_errors_naming_the_file() {
     v["camera_model"] = "EQUIRECTANGULAR".into();
     std::fs::write(&json, v.to_string()).unwrap();
     assert_names(&load_err(d.path()), "EQUIRECTANGULAR is not supported");
-    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
-    v["frames"][1]["file_path"] = "images/nowhere.png".into();
-    std::fs::write(&json, v.to_string()).unwrap();
-    assert_names(&load_err(d.path()), "nowhere.png");
     std::fs::write(&json, &good[..good.len() / 2]).unwrap();
     assert_names(&load_err(d.path()), "transforms.json");
 }
