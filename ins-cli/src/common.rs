@@ -1,17 +1,17 @@
-//! What the commands share: the compute backend, the options of a training run, the one
-//! generic `train` every variant's command calls, and small parsers.
+//! What the commands share: the compute backend, the VGG weights, the options of a training
+//! run, the one generic `train` every variant's command calls, and small parsers.
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use burn::prelude::Device;
-use clap::Args;
+use clap::{ArgMatches, Args};
+use ins_conv::Precision;
 use ins_core::backend::BackendChoice;
 use ins_core::train::progress::FirstStep;
 use ins_core::train::{TrainOptions, TrainOutcome};
-use ins_models::run::Variant;
-
-use crate::vgg_cmd::VggArgs;
+use ins_models::run::{RunConfig, Variant};
+use vgg_import::{Preprocess, Vgg, VggSource, load_vgg};
 
 /// Where a command computes.
 #[derive(Args, Debug, Clone)]
@@ -26,6 +26,75 @@ impl DeviceArgs {
     /// has no adapter).
     pub fn device(&self) -> Result<Device> {
         Ok(self.backend.try_device()?)
+    }
+}
+
+/// Where VGG weights come from; shared by every command that needs them.
+#[derive(Args, Debug, Clone)]
+pub struct VggArgs {
+    /// VGG-16 ONNX file (default: the cached ImageNet VGG-16, fetched on first use).
+    #[arg(long, value_name = "FILE")]
+    pub onnx: Option<PathBuf>,
+    /// Input convention of the weights: caffe or torch (default: detected from the file).
+    #[arg(long, value_name = "P")]
+    pub preprocess: Option<Preprocess>,
+    /// Cache folder (default: $INS_CACHE_DIR, else ~/.cache/ins-rs).
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
+    /// Arithmetic of the VGG convolutions: f32; bf16 (BF16 products with f32 sums on Intel AMX
+    /// or by AVX-512 BF16, on flex; f32 on CPUs with neither); or f16 (Burn's convolution in
+    /// half precision on a wgpu adapter with f16 shaders; f32 elsewhere). Default: bf16 where
+    /// the CPU has either, else f32.
+    #[arg(long, value_name = "P")]
+    pub precision: Option<Precision>,
+}
+
+impl VggArgs {
+    /// The precision these arguments ask for, the default resolved for this CPU.
+    pub fn precision(&self) -> Precision {
+        self.precision.unwrap_or(Precision::Bf16.effective())
+    }
+
+    /// Loads the VGG these arguments describe, at the asked precision (saying so when BF16 was
+    /// asked for and this CPU cannot run it).
+    pub fn load(&self, device: &Device) -> anyhow::Result<Vgg> {
+        let vgg = load_vgg(&self.source(), device)?;
+        let precision = self.precision();
+        let runs = precision.effective_on(device);
+        match (precision, runs) {
+            (Precision::Bf16, Precision::F32) if ins_conv::kernel_device(device) => eprintln!(
+                "--precision bf16: this CPU (or {}) offers neither AMX-BF16 nor AVX-512 BF16; \
+                 VGG runs in f32",
+                ins_conv::dpbf16::DISABLE_ENV
+            ),
+            (Precision::Bf16, Precision::F32) => eprintln!(
+                "VGG convolutions in f32 (Burn's convolution: the BF16 kernels are flex's; \
+                 --precision f16 for half precision on a GPU)"
+            ),
+            (Precision::F16, Precision::F32) => eprintln!(
+                "--precision f16: this device has no f16 arithmetic (f16 runs on a wgpu adapter \
+                 with f16 shaders); VGG runs in f32"
+            ),
+            (_, Precision::Bf16) => eprintln!(
+                "VGG convolutions in {} (--precision f32 for f32)",
+                ins_conv::Engine::bf16_or_f32().describe()
+            ),
+            (_, Precision::F16) => {
+                eprintln!("VGG convolutions in f16 on the GPU (--precision f32 for f32)")
+            }
+            (_, Precision::F32) => {}
+        }
+        Ok(vgg.with_precision(precision))
+    }
+
+    /// The source description, fetching the default weights if needed.
+    pub fn source(&self) -> VggSource {
+        VggSource {
+            onnx: self.onnx.clone(),
+            preprocess: self.preprocess,
+            cache_dir: self.cache.clone(),
+            fetch_if_missing: true,
+        }
     }
 }
 
@@ -88,7 +157,7 @@ impl TrainCommand<'_> {
                 self.run.quiet,
             )
         });
-        let vgg = if V::style(cfg).styles.is_empty() {
+        let vgg = if cfg.style().styles.is_empty() {
             None
         } else {
             Some(self.vgg.load(&device)?)
@@ -96,13 +165,28 @@ impl TrainCommand<'_> {
         eprintln!("{what} on {backend} into {}", self.out.display());
         let mut opts = self
             .run
-            .train_options(self.out, V::seed(cfg), checkpoint_every);
+            .train_options(self.out, cfg.seed(), checkpoint_every);
         opts.first_step = first_step;
         let outcome = ins_models::run::train::<V>(cfg, vgg, &device, opts)?;
         print_summary(self.out, &outcome);
         eprintln!("done in {:.1} s: {next}", outcome.seconds);
         Ok(outcome)
     }
+}
+
+/// A variant's configuration: the flags given on the command line over the `--config FILE`
+/// (a run's `config.json` or one written by hand), over the defaults. A file another variant's
+/// run wrote is refused by name.
+pub fn merged_config<V: Variant>(
+    cli: V::Config,
+    matches: &ArgMatches,
+    file: Option<&Path>,
+) -> Result<V::Config> {
+    if let Some(file) = file {
+        ins_models::config::check_variant(file, V::KEY)
+            .with_context(|| format!("--config is not for `ins-cli train {}`", V::KEY))?;
+    }
+    ins_models::config::merge_with_file(cli, matches, file)
 }
 
 /// The one JSON line a finished `train` prints on stdout.

@@ -7,17 +7,15 @@ use burn::prelude::*;
 use clap::{ArgMatches, Args};
 use ins_core::imaging::RgbImage;
 use ins_core::render::sphere_tracing::TraceOptions;
-use ins_models::config::merge_with_file;
 use ins_models::idr::eval::{evaluate_views, render_camera};
 use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
 use ins_models::run::RunKind;
 use ins_scene::camera::Camera;
 use ins_scene::paths::{PathKind, path_for_scene};
 
-use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
+use crate::common::{DeviceArgs, RunArgs, TrainCommand, VggArgs, merged_config, parse_size};
 use crate::counter::Counter;
-use crate::vgg_cmd::VggArgs;
-use crate::video::{FrameOutput, write_frames};
+use ins_models::video::{FrameOutput, write_frames};
 
 #[derive(Args, Debug)]
 pub struct TrainIdr {
@@ -35,7 +33,7 @@ pub struct TrainIdr {
 }
 
 pub fn train(a: TrainIdr, matches: &ArgMatches) -> Result<()> {
-    let cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
+    let cfg = merged_config::<Idr>(a.config, matches, a.run.config.as_deref())?;
     let what = match cfg.kind()? {
         RunKind::Pretrain => format!("reconstructing a surface ({} SDF)", cfg.sdf),
         RunKind::Stylize => format!(

@@ -14,7 +14,6 @@ mod sfm_cmd;
 mod siren_cmd;
 mod stylize2d_cmd;
 mod vgg_cmd;
-mod video;
 mod view_cmd;
 mod view_size;
 mod viewer;
@@ -146,7 +145,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
         },
         Command::View(a) => view_cmd::run(a),
         Command::Export { command } => match command {
-            ExportCommand::Mesh(a) => export_cmd::export_mesh(a),
+            ExportCommand::Mesh(a) => export_cmd::run(a),
         },
         Command::Vgg { command } => vgg_cmd::run(command),
         Command::Data { command } => data_cmd::run(command),

@@ -6,7 +6,6 @@ use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use clap::{ArgMatches, Args};
 use ins_core::imaging::RgbImage;
-use ins_models::config::merge_with_file;
 use ins_models::nerf::eval::{ViewRender, depth_agreement, evaluate_views, render_camera};
 use ins_models::nerf::{Nerf, NerfRun, NerfRunConfig};
 use ins_models::run::RunKind;
@@ -14,10 +13,9 @@ use ins_scene::camera::Camera;
 use ins_scene::data::Split;
 use ins_scene::paths::{PathKind, path_for_scene};
 
-use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
+use crate::common::{DeviceArgs, RunArgs, TrainCommand, VggArgs, merged_config, parse_size};
 use crate::counter::Counter;
-use crate::vgg_cmd::VggArgs;
-use crate::video::{FrameOutput, write_frames};
+use ins_models::video::{FrameOutput, write_frames};
 
 #[derive(Args, Debug)]
 pub struct TrainNerf {
@@ -35,7 +33,7 @@ pub struct TrainNerf {
 }
 
 pub fn train(a: TrainNerf, matches: &ArgMatches) -> Result<()> {
-    let cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
+    let cfg = merged_config::<Nerf>(a.config, matches, a.run.config.as_deref())?;
     let what = match cfg.kind()? {
         RunKind::Pretrain => format!(
             "pretraining a NeRF ({} content module) on {}",
@@ -249,12 +247,12 @@ pub fn eval(a: EvalNerf) -> Result<()> {
                 t.background(),
                 &device,
             )?;
-            let (median, agree, pixels) = depth_agreement(&e.render, &tr);
-            line["depth_rel_error_median"] = median.into();
-            line["opacity_agreement"] = agree.into();
-            line["opaque_pixels"] = pixels.into();
-            depth_errors.push(median);
-            agreements.push(agree);
+            let d = depth_agreement(&e.render, &tr);
+            line["depth_rel_error_median"] = d.median_rel_error.into();
+            line["opacity_agreement"] = d.agreement.into();
+            line["opaque_pixels"] = d.both.into();
+            depth_errors.push(d.median_rel_error);
+            agreements.push(d.agreement);
         }
         println!("{line}");
         sum_psnr += e.psnr;

@@ -10,7 +10,10 @@ use clap::Args;
 use ins_core::imaging::RgbImage;
 use serde_json::Value;
 
-use crate::consistency_cmd::EvalConsistency;
+use ins_models::consistency::evaluate::{BASELINE_STEPS, FRAMES, REFERENCE_STEPS, REFERENCE_VIEWS};
+use ins_models::consistency::{ConsistencyOptions, StylizedPair, evaluate};
+use ins_models::mesh_export::{MeshFormat, export_mesh};
+use ins_models::run::MeshOptions;
 
 #[derive(Args, Debug)]
 pub struct Report {
@@ -32,7 +35,7 @@ pub struct Report {
 #[derive(Args, Debug)]
 struct EvalOptions {
     /// Frames of the path.
-    #[arg(long, default_value_t = 60)]
+    #[arg(long, default_value_t = FRAMES)]
     frames: usize,
     /// Frame size WxH (default: the run's training resolution).
     #[arg(long)]
@@ -41,13 +44,13 @@ struct EvalOptions {
     #[arg(long)]
     baseline2d: bool,
     /// Optimisation steps per frame of the 2D baseline.
-    #[arg(long, default_value_t = crate::consistency_cmd::BASELINE_STEPS)]
+    #[arg(long, default_value_t = BASELINE_STEPS)]
     baseline_steps: usize,
     /// Views at which the texture on the object is measured.
-    #[arg(long, default_value_t = crate::consistency_cmd::REFERENCE_VIEWS)]
+    #[arg(long, default_value_t = REFERENCE_VIEWS)]
     reference_views: usize,
     /// Steps of the converged 2D reference per view.
-    #[arg(long, default_value_t = crate::consistency_cmd::REFERENCE_STEPS)]
+    #[arg(long, default_value_t = REFERENCE_STEPS)]
     reference_steps: usize,
     #[command(flatten)]
     device: crate::common::DeviceArgs,
@@ -55,7 +58,7 @@ struct EvalOptions {
     #[arg(long)]
     quiet: bool,
     #[command(flatten)]
-    vgg: crate::vgg_cmd::VggArgs,
+    vgg: crate::common::VggArgs,
 }
 
 /// The files of the evaluation folder a report shows, as (source name, name in the report).
@@ -136,23 +139,24 @@ pub fn run(a: Report) -> Result<()> {
             a.run.display()
         );
         let e = &a.eval;
-        crate::consistency_cmd::run(EvalConsistency {
-            run: a.run.clone(),
-            path: None,
+        let options = ConsistencyOptions {
             frames: e.frames,
-            size: e.size.clone(),
-            style: 0,
-            mix: None,
+            size: e
+                .size
+                .as_deref()
+                .map(crate::common::parse_size)
+                .transpose()?,
             baseline2d: e.baseline2d,
             baseline_steps: e.baseline_steps,
-            baseline_lr: crate::consistency_cmd::BASELINE_LR,
             reference_views: e.reference_views,
             reference_steps: e.reference_steps,
-            out: None,
-            device: e.device.clone(),
-            quiet: e.quiet,
-            vgg: e.vgg.clone(),
-        })?;
+            ..ConsistencyOptions::default()
+        };
+        let device = e.device.device()?;
+        let pair = StylizedPair::load(&a.run, &device)?;
+        let vgg = e.vgg.load(&device)?;
+        let mut progress = crate::consistency_cmd::CliProgress::new(e.quiet);
+        evaluate(&pair, &options, &vgg, &device, &mut progress)?;
     }
     let summary: Value = serde_json::from_str(
         &std::fs::read_to_string(&summary_path)
@@ -217,15 +221,11 @@ const REPORT_MESH_RESOLUTION: usize = 128;
 /// bytes in base64: a page opened from disk may not fetch files); returns the exporter's summary.
 fn report_mesh(run: &Path, out: &Path, device: &burn::prelude::Device) -> Result<Value> {
     let glb = out.join("mesh.glb");
-    let summary = crate::export_cmd::export(
-        run,
-        REPORT_MESH_RESOLUTION,
-        None,
-        None,
-        crate::export_cmd::MeshFormat::Glb,
-        &glb,
-        device,
-    )?;
+    let options = MeshOptions {
+        resolution: REPORT_MESH_RESOLUTION,
+        level: None,
+    };
+    let summary = export_mesh(run, options, None, MeshFormat::Glb, &glb, device)?;
     let bytes = std::fs::read(&glb).with_context(|| format!("reading {}", glb.display()))?;
     use base64::Engine as _;
     let js = format!(

@@ -4,11 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::{ArgMatches, Args};
-use ins_models::config::merge_with_file;
 use ins_models::siren::{Siren, SirenRun, SirenRunConfig};
 
-use crate::common::{DeviceArgs, RunArgs, TrainCommand, parse_size};
-use crate::vgg_cmd::VggArgs;
+use crate::common::{DeviceArgs, RunArgs, TrainCommand, VggArgs, merged_config, parse_size};
 
 #[derive(Args, Debug)]
 pub struct TrainSiren {
@@ -63,7 +61,7 @@ fn demo_input(
 }
 
 pub fn train(a: TrainSiren, matches: &ArgMatches) -> Result<()> {
-    let mut cfg = merge_with_file(a.config, matches, a.run.config.as_deref())?;
+    let mut cfg = merged_config::<Siren>(a.config, matches, a.run.config.as_deref())?;
     // The backend before anything is written: a machine that cannot run it is told so with
     // the run folder untouched.
     a.device.device()?;

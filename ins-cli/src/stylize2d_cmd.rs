@@ -9,11 +9,11 @@ use clap::Args;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::LossWeights;
 use ins_core::train::TrainOptions;
-use ins_models::stylize2d::{Stylize2dSettings, painting_loss, stylize, stylize_with};
+use ins_models::stylize2d::{FrameRun, Stylize2dSettings, frame_run_dir, stylize, stylize_frames};
 use ins_scene::data::images::list_images;
 use vgg_import::Vgg;
 
-use crate::vgg_cmd::VggArgs;
+use crate::common::VggArgs;
 
 #[derive(Args, Debug)]
 pub struct Stylize2d {
@@ -107,13 +107,6 @@ impl Stylize2d {
     }
 }
 
-/// `<out>.run`: where the trainer's metrics, plot and checkpoints of an output go.
-fn run_dir(out: &Path) -> PathBuf {
-    let mut s = out.as_os_str().to_owned();
-    s.push(".run");
-    PathBuf::from(s)
-}
-
 pub fn run(a: Stylize2d) -> Result<()> {
     if a.steps == 0 {
         bail!("--steps must be at least 1");
@@ -124,7 +117,7 @@ pub fn run(a: Stylize2d) -> Result<()> {
     let vgg = a.vgg.load(&device)?;
     let settings = a.settings(&vgg);
     let options = |out: &Path, resume: bool, checkpoint_every: usize| {
-        let mut o = TrainOptions::new(run_dir(out));
+        let mut o = TrainOptions::new(frame_run_dir(out));
         o.checkpoint_every = checkpoint_every;
         o.resume = resume;
         o.quiet = a.quiet;
@@ -174,62 +167,4 @@ pub fn run(a: Stylize2d) -> Result<()> {
         (None, None) => bail!("give --content IMAGE or --frames DIR"),
     }
     Ok(())
-}
-
-/// What every frame of a per-frame 2D stylization shares.
-pub struct FrameRun<'a> {
-    /// The painting.
-    pub style: &'a RgbImage,
-    /// VGG-16.
-    pub vgg: &'a Vgg,
-    /// Steps, learning rate, weights.
-    pub settings: &'a Stylize2dSettings,
-    /// No progress bars.
-    pub quiet: bool,
-    /// Keep each frame's metrics and loss curve in `<frame>.png.run/`.
-    pub keep_runs: bool,
-    /// Where to compute.
-    pub device: &'a burn::prelude::Device,
-}
-
-/// Stylizes each of `frames` on its own into `out/<stem>.png`; frames already there are kept,
-/// so an interrupted run continues where it stopped.
-pub fn stylize_frames(
-    frames: &[PathBuf],
-    out_dir: &Path,
-    load: impl Fn(&Path) -> Result<RgbImage>,
-    run: &FrameRun,
-) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(out_dir).map_err(|e| anyhow::anyhow!("{}: {e}", out_dir.display()))?;
-    let mut written = Vec::with_capacity(frames.len());
-    let perceptual = painting_loss(run.vgg, run.style, run.settings, run.device);
-    for (i, frame) in frames.iter().enumerate() {
-        let name = frame.file_stem().unwrap_or_default().to_string_lossy();
-        let out = out_dir.join(format!("{name}.png"));
-        written.push(out.clone());
-        if out.exists() {
-            eprintln!(
-                "frame {}/{}: {} exists, kept",
-                i + 1,
-                frames.len(),
-                out.display()
-            );
-            continue;
-        }
-        eprintln!("frame {}/{}: {}", i + 1, frames.len(), frame.display());
-        let img = load(frame)?;
-        // One frame is minutes at most: no checkpoints, the finished frames are the progress
-        // an interrupted run keeps.
-        let mut opts = TrainOptions::new(run_dir(&out));
-        opts.checkpoint_every = 0;
-        opts.quiet = run.quiet;
-        let (result, _) = stylize_with(&img, &perceptual, run.settings, opts)?;
-        result.save(&out)?;
-        if run.keep_runs {
-            let _ = std::fs::remove_dir_all(run_dir(&out).join("checkpoints"));
-        } else {
-            let _ = std::fs::remove_dir_all(run_dir(&out));
-        }
-    }
-    Ok(written)
 }

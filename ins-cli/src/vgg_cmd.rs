@@ -3,81 +3,11 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use burn::prelude::Device;
-use clap::{Args, Subcommand};
-use ins_conv::Precision;
+use clap::Subcommand;
 use ins_core::imaging::RgbImage;
 use vgg_import::source::{cache_dir, fetch_default, resolve_onnx};
-use vgg_import::{Preprocess, Vgg, VggSource, load_vgg};
 
-/// Where VGG weights come from; shared by every command that needs them.
-#[derive(Args, Debug, Clone)]
-pub struct VggArgs {
-    /// VGG-16 ONNX file (default: the cached ImageNet VGG-16, fetched on first use).
-    #[arg(long, value_name = "FILE")]
-    pub onnx: Option<PathBuf>,
-    /// Input convention of the weights: caffe or torch (default: detected from the file).
-    #[arg(long, value_name = "P")]
-    pub preprocess: Option<Preprocess>,
-    /// Cache folder (default: $INS_CACHE_DIR, else ~/.cache/ins-rs).
-    #[arg(long, value_name = "DIR")]
-    pub cache: Option<PathBuf>,
-    /// Arithmetic of the VGG convolutions: f32; bf16 (BF16 products with f32 sums on Intel AMX
-    /// or by AVX-512 BF16, on flex; f32 on CPUs with neither); or f16 (Burn's convolution in
-    /// half precision on a wgpu adapter with f16 shaders; f32 elsewhere). Default: bf16 where
-    /// the CPU has either, else f32.
-    #[arg(long, value_name = "P")]
-    pub precision: Option<Precision>,
-}
-
-impl VggArgs {
-    /// The precision these arguments ask for, the default resolved for this CPU.
-    pub fn precision(&self) -> Precision {
-        self.precision.unwrap_or(Precision::Bf16.effective())
-    }
-
-    /// Loads the VGG these arguments describe, at the asked precision (saying so when BF16 was
-    /// asked for and this CPU cannot run it).
-    pub fn load(&self, device: &Device) -> anyhow::Result<Vgg> {
-        let vgg = load_vgg(&self.source(), device)?;
-        let precision = self.precision();
-        let runs = precision.effective_on(device);
-        match (precision, runs) {
-            (Precision::Bf16, Precision::F32) if ins_conv::kernel_device(device) => eprintln!(
-                "--precision bf16: this CPU (or {}) offers neither AMX-BF16 nor AVX-512 BF16; \
-                 VGG runs in f32",
-                ins_conv::dpbf16::DISABLE_ENV
-            ),
-            (Precision::Bf16, Precision::F32) => eprintln!(
-                "VGG convolutions in f32 (Burn's convolution: the BF16 kernels are flex's; \
-                 --precision f16 for half precision on a GPU)"
-            ),
-            (Precision::F16, Precision::F32) => eprintln!(
-                "--precision f16: this device has no f16 arithmetic (f16 runs on a wgpu adapter \
-                 with f16 shaders); VGG runs in f32"
-            ),
-            (_, Precision::Bf16) => eprintln!(
-                "VGG convolutions in {} (--precision f32 for f32)",
-                ins_conv::Engine::bf16_or_f32().describe()
-            ),
-            (_, Precision::F16) => {
-                eprintln!("VGG convolutions in f16 on the GPU (--precision f32 for f32)")
-            }
-            (_, Precision::F32) => {}
-        }
-        Ok(vgg.with_precision(precision))
-    }
-
-    /// The source description, fetching the default weights if needed.
-    pub fn source(&self) -> VggSource {
-        VggSource {
-            onnx: self.onnx.clone(),
-            preprocess: self.preprocess,
-            cache_dir: self.cache.clone(),
-            fetch_if_missing: true,
-        }
-    }
-}
+use crate::common::{DeviceArgs, VggArgs};
 
 #[derive(Subcommand, Debug)]
 pub enum VggCommand {
@@ -103,7 +33,7 @@ pub enum VggCommand {
         #[arg(long)]
         out: PathBuf,
         #[command(flatten)]
-        device: crate::common::DeviceArgs,
+        device: DeviceArgs,
     },
 }
 

@@ -341,10 +341,10 @@ impl Viewer {
             }
             let name = format!("turntable-{}.gif", Self::mix_tag(&req));
             let out = self.view_dir()?.join(&name);
-            crate::video::write_frames(
+            ins_models::video::write_frames(
                 &pictures,
                 &[],
-                &crate::video::FrameOutput::for_path(&out)?,
+                &ins_models::video::FrameOutput::for_path(&out)?,
                 12,
             )?;
             Ok(json!({"path": out, "file": format!("/files/{name}")}))

@@ -6,7 +6,8 @@
 //! ([`merge_with_file`]); unknown fields in a file are refused with their name ([`read_json`]
 //! checks the keys itself: serde's `deny_unknown_fields` does not combine with `flatten`).
 //! Every field whose flag takes a path is stored absolute, found by its type ([`path_fields`]),
-//! so a path flag cannot be forgotten.
+//! so a path flag cannot be forgotten. A run's `config.json` also names the variant that wrote
+//! it ([`VARIANT_FIELD`]), which is how any run folder is loaded (`crate::run::any`).
 
 use std::path::Path;
 
@@ -33,15 +34,21 @@ fn known_fields<T: Serialize + Default>() -> Vec<String> {
     }
 }
 
-/// Reads a JSON config, naming the file and, for an unknown or malformed field, the field.
+/// The field of a run's `config.json` that names the variant that wrote it (`"nerf"`).
+pub const VARIANT_FIELD: &str = "variant";
+
+/// Reads a JSON config, naming the file and, for an unknown or malformed field, the field. The
+/// [`VARIANT_FIELD`] a run folder's config carries is not one of `T`'s fields: see
+/// [`check_variant`].
 pub fn read_json<T: Serialize + DeserializeOwned + Default>(path: &Path) -> Result<T> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let value: serde_json::Value = serde_json::from_str(&text)
+    let mut value: serde_json::Value = serde_json::from_str(&text)
         .with_context(|| format!("{}: malformed config", path.display()))?;
-    let serde_json::Value::Object(fields) = &value else {
+    let serde_json::Value::Object(fields) = &mut value else {
         anyhow::bail!("{}: malformed config (not a JSON object)", path.display());
     };
+    fields.remove(VARIANT_FIELD);
     let known = known_fields::<T>();
     if let Some(unknown) = fields.keys().find(|k| !known.contains(k)) {
         let mut known = known;
@@ -96,15 +103,34 @@ fn with_absolute_paths<T: Serialize + Args>(cfg: &T) -> Result<serde_json::Value
     Ok(value)
 }
 
-/// Writes a run's `config.json` into `out`, paths absolute, or, resuming, checks that the run
-/// was started with the same configuration (a resumed run with other options would silently be
-/// another run).
-pub fn write_run_config<T>(cfg: &T, out: &Path, resume: bool) -> Result<()>
+/// Checks that the config file at `path` is one of the variant `key` (`"nerf"`) when it names
+/// one: a run folder's config records its variant, and another variant's config is refused by
+/// name rather than field by field. A file without the field (written by hand, or by a run
+/// before the field existed) passes.
+pub fn check_variant(path: &Path, key: &str) -> Result<()> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let value: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: malformed config", path.display()))?;
+    match value.get(VARIANT_FIELD) {
+        None => Ok(()),
+        Some(serde_json::Value::String(k)) if k == key => Ok(()),
+        Some(other) => anyhow::bail!(
+            "{} names the variant {other}, not \"{key}\"",
+            path.display()
+        ),
+    }
+}
+
+/// Writes a run's `config.json` into `out`, paths absolute, with the variant `key` that wrote
+/// it; or, resuming, checks that the run was started with the same configuration (a resumed
+/// run with other options would silently be another run).
+pub fn write_run_config<T>(cfg: &T, key: &str, out: &Path, resume: bool) -> Result<()>
 where
     T: Serialize + DeserializeOwned + PartialEq + Default + Args,
 {
     let path = out.join("config.json");
-    let value = with_absolute_paths(cfg)?;
+    let mut value = with_absolute_paths(cfg)?;
     if resume && path.exists() {
         let saved: T = read_json(&path)?;
         if with_absolute_paths(&saved)? != value {
@@ -114,6 +140,9 @@ where
                 path.display()
             );
         }
+    }
+    if let serde_json::Value::Object(fields) = &mut value {
+        fields.insert(VARIANT_FIELD.into(), key.into());
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     ins_io::write_atomic(&path, serde_json::to_string_pretty(&value)?.as_bytes())?;
@@ -230,16 +259,19 @@ mod tests {
         let out = dir.path().join("run");
         let mut cfg = demo(3, 0.5, &["some/style.png"]);
         cfg.label = Some("some/label".into());
-        write_run_config(&cfg, &out, false).unwrap();
+        write_run_config(&cfg, "demo", &out, false).unwrap();
         let saved: Demo = read_json(&out.join("config.json")).unwrap();
         let expected = std::env::current_dir().unwrap().join("some/style.png");
         assert_eq!(saved.group.styles, vec![expected]);
         // Found by type: a path inside a flattened group is made absolute, a string is not.
         assert_eq!(saved.label.as_deref(), Some("some/label"));
         // The same relative options resume the run; other ones are refused.
-        write_run_config(&cfg, &out, true).unwrap();
+        write_run_config(&cfg, "demo", &out, true).unwrap();
         let other = Demo { steps: 4, ..cfg };
-        let e = format!("{:#}", write_run_config(&other, &out, true).unwrap_err());
+        let e = format!(
+            "{:#}",
+            write_run_config(&other, "demo", &out, true).unwrap_err()
+        );
         assert!(e.contains("another configuration"), "{e}");
     }
 

@@ -19,7 +19,7 @@ use ins_scene::patches::PatchSpec;
 use serde::{Deserialize, Serialize};
 
 use crate::image_task::{ImageObjective, ImageTask, render_image};
-use crate::run::{Run, RunKind, Start, StyleArgs, Variant};
+use crate::run::{Run, RunConfig, RunKind, Start, StyleArgs, Variant};
 
 /// Everything that defines a SIREN+INS run: the `ins-cli train siren` flags and the fields of
 /// the run's `config.json` are this one struct (unknown fields in a `--config` file are refused).
@@ -75,6 +75,16 @@ pub struct SirenRunConfig {
 impl Default for SirenRunConfig {
     fn default() -> Self {
         crate::config::clap_defaults()
+    }
+}
+
+impl RunConfig for SirenRunConfig {
+    fn style(&self) -> &StyleArgs {
+        &self.style
+    }
+
+    fn seed(&self) -> u64 {
+        self.seed
     }
 }
 
@@ -165,6 +175,7 @@ pub type SirenRun = Run<Siren>;
 
 impl Variant for Siren {
     const NAME: &'static str = "SIREN";
+    const KEY: &'static str = "siren";
     type Config = SirenRunConfig;
     type Data = SirenImages;
     type Model = Ins<SirenCim>;
@@ -178,22 +189,6 @@ impl Variant for Siren {
             bail!("at least one --style image is needed");
         }
         Ok(RunKind::Pretrain)
-    }
-
-    fn style(cfg: &SirenRunConfig) -> &StyleArgs {
-        &cfg.style
-    }
-
-    fn style_mut(cfg: &mut SirenRunConfig) -> &mut StyleArgs {
-        &mut cfg.style
-    }
-
-    fn base_run(_cfg: &SirenRunConfig) -> Option<&Path> {
-        None
-    }
-
-    fn seed(cfg: &SirenRunConfig) -> u64 {
-        cfg.seed
     }
 
     fn load_data(cfg: &mut SirenRunConfig) -> Result<SirenImages> {
@@ -232,14 +227,6 @@ impl Variant for Siren {
         _device: &Device,
     ) -> Ins<SirenCim> {
         model
-    }
-
-    fn n_styles(model: &Ins<SirenCim>) -> usize {
-        model.n_styles()
-    }
-
-    fn decode_extra(_task_state: Option<&[u8]>, _at: &Path) -> Result<()> {
-        Ok(())
     }
 
     fn task(

@@ -6,6 +6,8 @@
 //! that stylized 3D representations are measured against: each frame stylized on its own knows
 //! nothing of its neighbours.
 
+use std::path::{Path, PathBuf};
+
 use anyhow::Result;
 use burn::module::Param;
 use burn::prelude::*;
@@ -26,11 +28,9 @@ pub struct Canvas {
     pub pixels: Param<Tensor<4>>,
 }
 
-const CANVAS_GROUPS: &[GroupSpec] = &[GroupSpec::new("pixels", &["pixels"])];
-
 impl Optimizable for Canvas {
-    fn groups(&self) -> &'static [GroupSpec] {
-        CANVAS_GROUPS
+    fn groups(&self) -> Vec<GroupSpec> {
+        vec![GroupSpec::new("pixels", &["pixels"])]
     }
 }
 
@@ -172,4 +172,70 @@ pub fn stylize_with(
     let outcome = Trainer::new(vec![phase], opts).run(&mut task, Canvas::new(content, &ad))?;
     let image = outcome.model.to_rgb()?;
     Ok((image, outcome))
+}
+
+/// `<out>.run`: where the trainer's metrics, plot and checkpoints of a 2D stylization written
+/// to `out` go.
+pub fn frame_run_dir(out: &Path) -> PathBuf {
+    let mut s = out.as_os_str().to_owned();
+    s.push(".run");
+    PathBuf::from(s)
+}
+
+/// What every frame of a per-frame 2D stylization shares.
+pub struct FrameRun<'a> {
+    /// The painting.
+    pub style: &'a RgbImage,
+    /// VGG-16.
+    pub vgg: &'a Vgg,
+    /// Steps, learning rate, weights.
+    pub settings: &'a Stylize2dSettings,
+    /// No progress bars.
+    pub quiet: bool,
+    /// Keep each frame's metrics and loss curve in `<frame>.png.run/`.
+    pub keep_runs: bool,
+    /// Where to compute.
+    pub device: &'a Device,
+}
+
+/// Stylizes each of `frames` on its own into `out/<stem>.png`; frames already there are kept,
+/// so an interrupted run continues where it stopped.
+pub fn stylize_frames(
+    frames: &[PathBuf],
+    out_dir: &Path,
+    load: impl Fn(&Path) -> Result<RgbImage>,
+    run: &FrameRun,
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(out_dir).map_err(|e| anyhow::anyhow!("{}: {e}", out_dir.display()))?;
+    let mut written = Vec::with_capacity(frames.len());
+    let perceptual = painting_loss(run.vgg, run.style, run.settings, run.device);
+    for (i, frame) in frames.iter().enumerate() {
+        let name = frame.file_stem().unwrap_or_default().to_string_lossy();
+        let out = out_dir.join(format!("{name}.png"));
+        written.push(out.clone());
+        if out.exists() {
+            eprintln!(
+                "frame {}/{}: {} exists, kept",
+                i + 1,
+                frames.len(),
+                out.display()
+            );
+            continue;
+        }
+        eprintln!("frame {}/{}: {}", i + 1, frames.len(), frame.display());
+        let img = load(frame)?;
+        // One frame is minutes at most: no checkpoints, the finished frames are the progress
+        // an interrupted run keeps.
+        let mut opts = TrainOptions::new(frame_run_dir(&out));
+        opts.checkpoint_every = 0;
+        opts.quiet = run.quiet;
+        let (result, _) = stylize_with(&img, &perceptual, run.settings, opts)?;
+        result.save(&out)?;
+        if run.keep_runs {
+            let _ = std::fs::remove_dir_all(frame_run_dir(&out).join("checkpoints"));
+        } else {
+            let _ = std::fs::remove_dir_all(frame_run_dir(&out));
+        }
+    }
+    Ok(written)
 }

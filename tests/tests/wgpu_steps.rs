@@ -28,7 +28,7 @@ use ins_core::backend::BackendChoice;
 use ins_core::train::{Stepper, Task, TrainOptions};
 use ins_models::idr::{Idr, IdrRunConfig};
 use ins_models::nerf::{Nerf, NerfRunConfig};
-use ins_models::run::{StyleArgs, Variant, prepare, train};
+use ins_models::run::{RunConfig, StyleArgs, Variant, prepare, train};
 use ins_scene::data::synthetic::{SynthOptions, write_blender, write_dtu};
 use ins_tests::{fixture, max_rel_diff, quiet_options, save_image, values};
 use vgg_import::onnx::read_vgg_like_onnx;
@@ -57,7 +57,7 @@ fn loss_and_gradients_at<V: Variant>(
     dir: &Path,
 ) -> (f64, Vec<Vec<f32>>) {
     let device = backend.device();
-    let vgg = (!V::style(cfg).styles.is_empty()).then(|| tiny_vgg(&device));
+    let vgg = (!cfg.style().styles.is_empty()).then(|| tiny_vgg(&device));
     let opts = TrainOptions::new(dir.join(backend.to_string()));
     let mut run = prepare::<V>(cfg, vgg, &device, &opts).unwrap();
     let phase = run.phases.remove(0);

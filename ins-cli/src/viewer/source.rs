@@ -6,10 +6,10 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
-use ins_core::imaging::{RgbImage, depth_image};
-use ins_models::consistency::{PathRender, load_path_render};
+use ins_core::imaging::{RgbImage, surface_depth_image};
 use ins_models::image_task::render_window;
-use ins_models::siren::{SirenRun, SirenRunConfig};
+use ins_models::run::{AnyRun, SceneRender};
+use ins_models::siren::SirenRun;
 use ins_scene::camera::Camera;
 use ins_scene::geometry::Vec3;
 use ins_scene::viewpoints::{ViewerPose, Viewpoints};
@@ -63,7 +63,7 @@ const BAND_PIXELS: usize = 24_000;
 pub enum Source {
     /// NeRF or IDR.
     Scene {
-        run: Box<dyn PathRender>,
+        run: Box<dyn SceneRender>,
         viewpoints: Viewpoints,
         variant: &'static str,
     },
@@ -74,16 +74,12 @@ pub enum Source {
 impl Source {
     /// Loads the run folder `dir`, whichever variant wrote it.
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
-        let config = ins_core::train::RunFolder::new(dir).config();
-        if SirenRunConfig::from_file(&config).is_ok() {
-            return Ok(Self::Image(SirenRun::load(dir, device)?));
-        }
-        let variant = if ins_models::nerf::NerfRunConfig::from_file(&config).is_ok() {
-            "nerf"
-        } else {
-            "idr"
+        let run = AnyRun::load(dir, device)?;
+        let variant = run.variant().key();
+        let run = match run {
+            AnyRun::Siren(run) => return Ok(Self::Image(run)),
+            scene => scene.into_scene("a 3D view")?,
         };
-        let run = load_path_render(dir, device)?;
         let viewpoints = Viewpoints::for_scene(run.scene())
             .with_context(|| format!("{}: the scene has no training views", dir.display()))?;
         Ok(Self::Scene {
@@ -269,22 +265,7 @@ fn picture(
             .iter()
             .flat_map(|d| [if d.is_some() { 1.0 } else { 0.0 }; 3])
             .collect(),
-        Mode::Depth => {
-            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for d in depth.iter().flatten() {
-                lo = lo.min(*d);
-                hi = hi.max(*d);
-            }
-            if !lo.is_finite() {
-                (lo, hi) = (0.0, 1.0);
-            }
-            let opacity: Vec<f32> = depth
-                .iter()
-                .map(|d| if d.is_some() { 1.0 } else { 0.0 })
-                .collect();
-            let d: Vec<f32> = depth.iter().map(|d| d.unwrap_or(0.0)).collect();
-            return depth_image(&d, &opacity, w, h, lo, hi);
-        }
+        Mode::Depth => return surface_depth_image(depth, w, h),
         Mode::Normals => {
             let rot = cam.rotation().transpose();
             let at = |x: usize, y: usize| points[y * w + x];

@@ -99,6 +99,8 @@ impl Default for IdrRunConfig {
     }
 }
 
+crate::run::args::scene_run_config!(IdrRunConfig);
+
 impl IdrRunConfig {
     /// Reads a run's `config.json`.
     pub fn from_file(path: &Path) -> Result<Self> {

@@ -7,6 +7,7 @@
 //! - [`render`]: sphere tracing and IDR's differentiable surface point.
 //! - [`task`]: the losses; [`run`]: pretraining, stylizing, loading runs.
 //! - [`eval`]: silhouette IoU and PSNR inside the mask; [`mesh`]: marching-cubes export.
+//! - [`scene_render`]: an IDR run as the shared 3D interface (frames, meshes).
 
 pub mod config;
 pub mod eval;
@@ -14,6 +15,7 @@ pub mod mesh;
 pub mod model;
 pub mod render;
 pub mod run;
+pub mod scene_render;
 pub mod task;
 
 pub use config::IdrRunConfig;

@@ -65,33 +65,23 @@ pub struct IdrModel {
     pub stylizer: Option<SurfaceStylizer>,
 }
 
-const PLAIN: &[GroupSpec] = &[
-    GroupSpec::new("sdf", &["sdf"]),
-    GroupSpec::new("color", &["color"]),
-];
-const STYLIZED: &[GroupSpec] = &[
-    GroupSpec::new("sdf", &["sdf"]),
-    GroupSpec::new("color", &["color"]),
-    GroupSpec::new("sim", &["stylizer.sim"]),
-    GroupSpec::new("am", &["stylizer.am.layers"]),
-    GroupSpec::new("blend", &["stylizer.am.gamma"]),
-];
-const TEXTURED: &[GroupSpec] = &[
-    GroupSpec::new("sdf", &["sdf"]),
-    GroupSpec::new("color", &["color"]),
-    GroupSpec::new("sim", &["stylizer.sim"]),
-    GroupSpec::new("texture", &["stylizer.position"]),
-    GroupSpec::new("am", &["stylizer.am.layers"]),
-    GroupSpec::new("blend", &["stylizer.am.gamma"]),
-];
-
 impl Optimizable for IdrModel {
-    fn groups(&self) -> &'static [GroupSpec] {
-        match &self.stylizer {
-            None => PLAIN,
-            Some(s) if s.position.grid.is_some() => TEXTURED,
-            Some(_) => STYLIZED,
+    /// The surface and its colour, then the stylizer's parts: the SIM, its texture grid where it
+    /// has one, the AM's layers and its blend (each its own group).
+    fn groups(&self) -> Vec<GroupSpec> {
+        let mut groups = vec![
+            GroupSpec::new("sdf", &["sdf"]),
+            GroupSpec::new("color", &["color"]),
+        ];
+        if let Some(s) = &self.stylizer {
+            groups.push(GroupSpec::new("sim", &["stylizer.sim"]));
+            if s.position.grid.is_some() {
+                groups.push(GroupSpec::new("texture", &["stylizer.position"]));
+            }
+            groups.push(GroupSpec::new("am", &["stylizer.am.layers"]));
+            groups.push(GroupSpec::new("blend", &["stylizer.am.gamma"]));
         }
+        groups
     }
 }
 

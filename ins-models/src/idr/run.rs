@@ -17,7 +17,7 @@ use super::eval::{evaluate_views, save_pictures};
 use super::model::IdrModel;
 use super::task::{IdrObjective, IdrTask, SurfaceStylization};
 use crate::run::scene_frame::{check_scene_frame, write_scene_frame};
-use crate::run::{Run, RunKind, Start, StyleArgs, Variant};
+use crate::run::{Run, RunKind, Start, Variant};
 
 /// IDR + INS.
 pub struct Idr;
@@ -86,6 +86,7 @@ pub fn load_scene(
 
 impl Variant for Idr {
     const NAME: &'static str = "IDR";
+    const KEY: &'static str = "idr";
     type Config = IdrRunConfig;
     type Data = Scene;
     type Model = IdrModel;
@@ -99,22 +100,6 @@ impl Variant for Idr {
             validate_pretraining(cfg)?;
         }
         Ok(kind)
-    }
-
-    fn style(cfg: &IdrRunConfig) -> &StyleArgs {
-        &cfg.style
-    }
-
-    fn style_mut(cfg: &mut IdrRunConfig) -> &mut StyleArgs {
-        &mut cfg.style
-    }
-
-    fn base_run(cfg: &IdrRunConfig) -> Option<&Path> {
-        cfg.source.from.as_deref()
-    }
-
-    fn seed(cfg: &IdrRunConfig) -> u64 {
-        cfg.schedule.seed
     }
 
     fn load_data(cfg: &mut IdrRunConfig) -> Result<Scene> {
@@ -181,14 +166,6 @@ impl Variant for Idr {
             &cfg.stylizer.position(),
             device,
         )
-    }
-
-    fn n_styles(model: &IdrModel) -> usize {
-        model.n_styles()
-    }
-
-    fn decode_extra(_task_state: Option<&[u8]>, _at: &Path) -> Result<()> {
-        Ok(())
     }
 
     fn task(

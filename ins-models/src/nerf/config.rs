@@ -97,6 +97,8 @@ impl Default for NerfRunConfig {
     }
 }
 
+crate::run::args::scene_run_config!(NerfRunConfig);
+
 impl NerfRunConfig {
     /// Reads a run's `config.json`.
     pub fn from_file(path: &Path) -> Result<Self> {

@@ -5,7 +5,8 @@ use std::path::Path;
 
 use anyhow::Result;
 use burn::prelude::*;
-use ins_core::imaging::{RgbImage, depth_image};
+use ins_core::eval::depth::DepthAgreement;
+use ins_core::imaging::{RgbImage, surface_depth_image};
 use ins_core::loss::{psnr, ssim};
 use ins_scene::camera::Camera;
 use ins_scene::data::Scene;
@@ -46,17 +47,17 @@ impl ViewRender {
 
     /// The depth as a colour-mapped image over the opaque pixels' range.
     pub fn depth_picture(&self) -> RgbImage {
-        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (d, o) in self.depth.iter().zip(&self.opacity) {
-            if *o > 0.5 {
-                lo = lo.min(d / o);
-                hi = hi.max(d / o);
-            }
-        }
-        if !lo.is_finite() {
-            (lo, hi) = (0.0, 1.0);
-        }
-        depth_image(&self.depth, &self.opacity, self.width, self.height, lo, hi)
+        surface_depth_image(&self.surface_depth(), self.width, self.height)
+    }
+
+    /// The distance along each pixel's ray to the surface it sees (the expected ray distance
+    /// over the opacity), `None` where the opacity is 0.5 or below.
+    pub fn surface_depth(&self) -> Vec<Option<f32>> {
+        self.depth
+            .iter()
+            .zip(&self.opacity)
+            .map(|(d, o)| (*o > 0.5).then(|| d / o))
+            .collect()
     }
 
     /// The surface point each pixel sees (the expected ray distance over the opacity), in the
@@ -99,29 +100,10 @@ fn to_vec<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
         .map_err(|e| anyhow::anyhow!("reading a render: {e:?}"))
 }
 
-/// Relative depth error and opacity agreement of two renders of one view: the median relative
-/// depth difference on pixels opaque in both, the fraction of pixels on the same side of 0.5
-/// opacity, and how many pixels were opaque in both.
-pub fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> (f64, f64, usize) {
-    let mut errors = Vec::new();
-    let mut agree = 0usize;
-    for i in 0..student.opacity.len() {
-        let (os, ot) = (student.opacity[i], teacher.opacity[i]);
-        if (os > 0.5) == (ot > 0.5) {
-            agree += 1;
-        }
-        if os > 0.5 && ot > 0.5 {
-            let (ds, dt) = (student.depth[i] / os, teacher.depth[i] / ot);
-            errors.push(((ds - dt).abs() / dt.abs().max(1e-6)) as f64);
-        }
-    }
-    errors.sort_by(f64::total_cmp);
-    let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
-    (
-        median,
-        agree as f64 / student.opacity.len().max(1) as f64,
-        errors.len(),
-    )
+/// Relative depth error and opacity agreement of two renders of one view (see
+/// [`DepthAgreement`]).
+pub fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> DepthAgreement {
+    DepthAgreement::of(&student.surface_depth(), &teacher.surface_depth())
 }
 
 /// Renders `rays` (an image's rays, row major) in chunks of [`CHUNK`] with a fixed sampling

@@ -12,6 +12,7 @@
 //! - [`run`]: the NeRF variant of the shared run layer (pretrain, stylize, load).
 //! - [`eval`]: whole-view renders and their PSNR / SSIM.
 //! - [`mesh`]: marching cubes of the density, coloured by the radiance.
+//! - [`scene_render`]: a NeRF run as the shared 3D interface (frames, meshes).
 
 pub mod background;
 pub mod config;
@@ -22,6 +23,7 @@ pub mod mesh;
 pub mod model;
 pub mod render;
 pub mod run;
+pub mod scene_render;
 pub mod state_io;
 pub mod task;
 pub mod view_audit;

@@ -82,62 +82,27 @@ fn field(arch: &NerfArch, aabb: [f32; 6], device: &Device) -> Field {
     }
 }
 
-const GRID: &[GroupSpec] = &[
-    GroupSpec::new("geometry", &["field.geometry"]),
-    GroupSpec::new("color", &["field.color"]),
-];
-const MLP: &[GroupSpec] = &[
-    GroupSpec::new("geometry", &["field.geometry"]),
-    GroupSpec::new("color", &["field.color"]),
-    GroupSpec::new("coarse", &["coarse"]),
-];
-const GRID_STYLIZED: &[GroupSpec] = &[
-    GroupSpec::new("geometry", &["field.geometry"]),
-    GroupSpec::new("color", &["field.color"]),
-    GroupSpec::new("sim", &["stylizer.sim"]),
-    GroupSpec::new("am_density", &["stylizer.am.density"]),
-    GroupSpec::new("am_color", &["stylizer.am.feature"]),
-];
-const MLP_STYLIZED: &[GroupSpec] = &[
-    GroupSpec::new("geometry", &["field.geometry"]),
-    GroupSpec::new("color", &["field.color"]),
-    GroupSpec::new("coarse", &["coarse"]),
-    GroupSpec::new("sim", &["stylizer.sim"]),
-    GroupSpec::new("am_density", &["stylizer.am.density"]),
-    GroupSpec::new("am_color", &["stylizer.am.feature"]),
-];
-const GRID_TEXTURED: &[GroupSpec] = &[
-    GroupSpec::new("geometry", &["field.geometry"]),
-    GroupSpec::new("color", &["field.color"]),
-    GroupSpec::new("sim", &["stylizer.sim"]),
-    GroupSpec::new("texture", &["stylizer.position"]),
-    GroupSpec::new("am_density", &["stylizer.am.density"]),
-    GroupSpec::new("am_color", &["stylizer.am.feature"]),
-];
-const MLP_TEXTURED: &[GroupSpec] = &[
-    GroupSpec::new("geometry", &["field.geometry"]),
-    GroupSpec::new("color", &["field.color"]),
-    GroupSpec::new("coarse", &["coarse"]),
-    GroupSpec::new("sim", &["stylizer.sim"]),
-    GroupSpec::new("texture", &["stylizer.position"]),
-    GroupSpec::new("am_density", &["stylizer.am.density"]),
-    GroupSpec::new("am_color", &["stylizer.am.feature"]),
-];
-
 impl Optimizable for NerfModel {
-    fn groups(&self) -> &'static [GroupSpec] {
-        let textured = self
-            .stylizer
-            .as_ref()
-            .is_some_and(|s| s.position.grid.is_some());
-        match (self.coarse.is_some(), self.stylizer.is_some(), textured) {
-            (false, false, _) => GRID,
-            (true, false, _) => MLP,
-            (false, true, false) => GRID_STYLIZED,
-            (true, true, false) => MLP_STYLIZED,
-            (false, true, true) => GRID_TEXTURED,
-            (true, true, true) => MLP_TEXTURED,
+    /// The field's geometry and colour, the coarse field of the MLP variant, then the stylizer's
+    /// parts: the SIM, its texture grid where it has one, and the AM's density and colour
+    /// branches (each its own group, so the density can be kept while the colour stylizes).
+    fn groups(&self) -> Vec<GroupSpec> {
+        let mut groups = vec![
+            GroupSpec::new("geometry", &["field.geometry"]),
+            GroupSpec::new("color", &["field.color"]),
+        ];
+        if self.coarse.is_some() {
+            groups.push(GroupSpec::new("coarse", &["coarse"]));
         }
+        if let Some(s) = &self.stylizer {
+            groups.push(GroupSpec::new("sim", &["stylizer.sim"]));
+            if s.position.grid.is_some() {
+                groups.push(GroupSpec::new("texture", &["stylizer.position"]));
+            }
+            groups.push(GroupSpec::new("am_density", &["stylizer.am.density"]));
+            groups.push(GroupSpec::new("am_color", &["stylizer.am.feature"]));
+        }
+        groups
     }
 }
 

@@ -25,7 +25,7 @@ use super::state_io::NerfState;
 use super::task::{EvalSchedule, NerfObjective, NerfTask, Sampler, Stylization};
 use crate::run::scene::{heldout_views, load_scene, spread};
 use crate::run::scene_frame::{check_scene_frame, write_scene_frame};
-use crate::run::{Run, RunKind, Start, StyleArgs, Variant};
+use crate::run::{Run, RunKind, Start, Variant};
 
 /// NeRF + INS.
 pub struct Nerf;
@@ -53,6 +53,7 @@ pub const PATCH_SHARE: f32 = 0.6;
 
 impl Variant for Nerf {
     const NAME: &'static str = "NeRF";
+    const KEY: &'static str = "nerf";
     type Config = NerfRunConfig;
     type Data = NerfScene;
     type Model = NerfModel;
@@ -62,22 +63,6 @@ impl Variant for Nerf {
 
     fn kind(cfg: &NerfRunConfig) -> Result<RunKind> {
         cfg.kind()
-    }
-
-    fn style(cfg: &NerfRunConfig) -> &StyleArgs {
-        &cfg.style
-    }
-
-    fn style_mut(cfg: &mut NerfRunConfig) -> &mut StyleArgs {
-        &mut cfg.style
-    }
-
-    fn base_run(cfg: &NerfRunConfig) -> Option<&Path> {
-        cfg.source.from.as_deref()
-    }
-
-    fn seed(cfg: &NerfRunConfig) -> u64 {
-        cfg.schedule.seed
     }
 
     fn load_data(cfg: &mut NerfRunConfig) -> Result<NerfScene> {
@@ -148,17 +133,6 @@ impl Variant for Nerf {
             &cfg.stylizer.position(),
             device,
         )
-    }
-
-    fn n_styles(model: &NerfModel) -> usize {
-        model.n_styles()
-    }
-
-    fn decode_extra(task_state: Option<&[u8]>, at: &Path) -> Result<NerfState> {
-        match task_state {
-            Some(bytes) => super::state_io::decode(bytes).with_context(|| at.display().to_string()),
-            None => Ok(NerfState::default()),
-        }
     }
 
     fn task(

@@ -33,6 +33,16 @@ pub struct NerfState {
     pub dropped_views: Vec<usize>,
 }
 
+impl crate::run::RunState for NerfState {
+    fn decode(task_state: Option<&[u8]>, at: &std::path::Path) -> Result<Self> {
+        use anyhow::Context as _;
+        match task_state {
+            Some(bytes) => decode(bytes).with_context(|| at.display().to_string()),
+            None => Ok(NerfState::default()),
+        }
+    }
+}
+
 /// Encodes the task state.
 pub fn encode(state: &NerfState) -> Vec<u8> {
     let (samples_per_ray, grid) = (state.samples_per_ray, state.grid.as_ref());

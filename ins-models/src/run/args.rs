@@ -242,6 +242,28 @@ impl Default for StylizerArgs {
     }
 }
 
+/// Implements [`RunConfig`](super::RunConfig) for a scene variant's config made of the shared
+/// groups: its paintings in `style`, its seed in `schedule`, its pretrained run in
+/// `source.from`.
+macro_rules! scene_run_config {
+    ($config:ty) => {
+        impl $crate::run::RunConfig for $config {
+            fn style(&self) -> &$crate::run::StyleArgs {
+                &self.style
+            }
+
+            fn seed(&self) -> u64 {
+                self.schedule.seed
+            }
+
+            fn base_run(&self) -> Option<&std::path::Path> {
+                self.source.from.as_deref()
+            }
+        }
+    };
+}
+pub(crate) use scene_run_config;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -346,9 +368,9 @@ mod tests {
         let mut resumed = merge_with_file(cli, &matches, Some(&file)).unwrap();
         resumed.style.resolve(64, 256, StyleLoss::Nnfm);
         assert_eq!(resumed.style.loss(), StyleLoss::Gram, "it ran Gram");
-        write_run_config(&resumed, &run, true).expect("the old run resumes");
+        write_run_config(&resumed, "nerf", &run, true).expect("the old run resumes");
         // Today's defaults (guided NNFM) are another configuration, and are refused.
-        let e = write_run_config(&cfg, &run, true).unwrap_err();
+        let e = write_run_config(&cfg, "nerf", &run, true).unwrap_err();
         assert!(format!("{e:#}").contains("another configuration"), "{e:#}");
     }
 

@@ -13,7 +13,7 @@ use ins_core::train::{Phase, RunFolder, RunLock, TrainError, TrainOptions, Train
 use vgg_import::{Preprocess, Vgg};
 
 use super::args::RunKind;
-use super::variant::{Start, Variant};
+use super::variant::{RunConfig, RunState, Start, Variant};
 
 /// Trains a run of variant `V` into `opts.out_dir`: pretraining (`--scene`, or SIREN's image),
 /// or stylizing the pretrained run the config names (`--from`). `vgg` is needed where the run
@@ -79,7 +79,8 @@ pub fn prepare<V: Variant>(
             Start::Fresh(data)
         }
         RunKind::Stylize => {
-            let from = V::base_run(&cfg)
+            let from = cfg
+                .base_run()
                 .context("stylizing needs --from RUN")?
                 .to_path_buf();
             let base = Run::<V>::load(&from, device)?;
@@ -87,7 +88,9 @@ pub fn prepare<V: Variant>(
                 bail!(
                     "{} is already a stylized run; stylize its pretrained run ({}) instead",
                     from.display(),
-                    V::base_run(&base.config).map_or("?".into(), |p| p.display().to_string())
+                    base.config
+                        .base_run()
+                        .map_or("?".into(), |p| p.display().to_string())
                 );
             }
             V::inherit(&mut cfg, &base.config, &from)?;
@@ -95,7 +98,7 @@ pub fn prepare<V: Variant>(
             Start::From(base)
         }
     };
-    let styles = load_styles(&V::style(&cfg).styles)?;
+    let styles = load_styles(&cfg.style().styles)?;
 
     let folder = RunFolder::new(&opts.out_dir);
     let lock = folder.lock()?;
@@ -105,10 +108,10 @@ pub fn prepare<V: Variant>(
         }
         .into());
     }
-    crate::config::write_run_config(&cfg, folder.dir(), opts.resume)?;
+    crate::config::write_run_config(&cfg, V::KEY, folder.dir(), opts.resume)?;
 
     let ad = device.clone().autodiff();
-    let seed = V::seed(&cfg);
+    let seed = cfg.seed();
     let build = |d: &Device| match &start {
         Start::Fresh(data) => {
             ins_core::train::seeding::seeded(d, seed, || V::new_model(&cfg, data, d))
@@ -133,7 +136,7 @@ pub fn prepare<V: Variant>(
     } else {
         let vgg = vgg.context("stylizing needs VGG-16")?.to_device(&ad);
         let preprocess = vgg.preprocess;
-        let s = V::style(&cfg);
+        let s = cfg.style();
         let mut loss = PerceptualLoss::new(vgg, &styles, s.style_size, s.loss(), &ad)
             .with_match_radius(s.match_radius)
             .with_texture_match_radius(s.texture_match_radius);
@@ -146,7 +149,7 @@ pub fn prepare<V: Variant>(
         }
         (Some(loss), preprocess)
     };
-    let s = V::style(&cfg);
+    let s = cfg.style();
     let weights = LossWeights::or_defaults(preprocess, s.loss(), s.content_weight, s.style_weight);
     let task = V::task(&cfg, start, style, &folder, &ad)?;
     let phases = V::phases(&cfg, kind, weights);
@@ -206,6 +209,14 @@ impl<V: Variant> Run<V> {
                 V::NAME
             );
         }
+        crate::config::check_variant(&config_path, V::KEY).with_context(|| {
+            format!(
+                "{} is not {} {} run",
+                dir.display(),
+                article(V::NAME),
+                V::NAME
+            )
+        })?;
         let config: V::Config = crate::config::read_json(&config_path).with_context(|| {
             format!(
                 "{} is not {} {} run",
@@ -217,7 +228,7 @@ impl<V: Variant> Run<V> {
         let base: Option<V::Config> = match V::kind(&config)? {
             RunKind::Pretrain => None,
             RunKind::Stylize => {
-                let from = V::base_run(&config).context("a stylized run without --from")?;
+                let from = config.base_run().context("a stylized run without --from")?;
                 Some(
                     crate::config::read_json(&RunFolder::new(from).config())
                         .with_context(|| format!("the base run of {}", dir.display()))?,
@@ -226,7 +237,7 @@ impl<V: Variant> Run<V> {
         };
         let mut scene_cfg = base.clone().unwrap_or_else(|| config.clone());
         let data = V::load_data(&mut scene_cfg)?;
-        let field_run = match V::base_run(&config) {
+        let field_run = match config.base_run() {
             Some(from) if base.is_some() => RunFolder::new(from),
             _ => RunFolder::new(dir),
         };
@@ -238,10 +249,10 @@ impl<V: Variant> Run<V> {
         let ckpt = CheckpointStore::load_dir(&latest)?;
         let mut model = V::new_model(&scene_cfg, &data, device);
         if base.is_some() {
-            model = V::add_stylizer(model, &config, V::style(&config).styles.len(), device);
+            model = V::add_stylizer(model, &config, config.style().styles.len(), device);
         }
         let model = load_module_bytes(model, ckpt.model, &CheckpointStore::model_file(&latest))?;
-        let extra = V::decode_extra(ckpt.task.as_deref(), &CheckpointStore::task_file(&latest))?;
+        let extra = V::Extra::decode(ckpt.task.as_deref(), &CheckpointStore::task_file(&latest))?;
         Ok(Self {
             dir: dir.to_path_buf(),
             config,
@@ -259,8 +270,10 @@ impl<V: Variant> Run<V> {
     }
 
     /// A style code `[1, n]` from mix weights (normalised; default: the first style), or `None`
-    /// for an unstylized run (where a mix is an error naming the run).
+    /// for an unstylized run (where a mix is an error naming the run). A run renders as many
+    /// styles as its config names paintings (its stylizer was built for them).
     pub fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
-        crate::style_mix::code(V::n_styles(&self.model), mix, &self.dir, device)
+        let n_styles = self.config.style().styles.len();
+        crate::style_mix::code(n_styles, mix, &self.dir, device)
     }
 }

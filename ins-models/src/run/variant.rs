@@ -15,6 +15,36 @@ use serde::de::DeserializeOwned;
 use super::args::{RunKind, StyleArgs};
 use super::lifecycle::Run;
 
+/// What the run lifecycle reads of any variant's configuration: its paintings, its seed and,
+/// for a stylizing run, the pretrained run it starts from. Scene variants whose configs are made
+/// of the shared argument groups get it from the `scene_run_config!` macro of [`super::args`].
+pub trait RunConfig:
+    Clone + PartialEq + Default + Serialize + DeserializeOwned + clap::Args
+{
+    /// The paintings and the perceptual loss's settings.
+    fn style(&self) -> &StyleArgs;
+    /// The run's seed.
+    fn seed(&self) -> u64;
+    /// The pretrained run a stylizing config starts from (none for a variant that fits and
+    /// stylizes in one run).
+    fn base_run(&self) -> Option<&Path> {
+        None
+    }
+}
+
+/// What a run keeps beside its model in a checkpoint (the task's state, e.g. NeRF's occupancy
+/// grid), decoded when the run is loaded back; nothing for most variants.
+pub trait RunState: Sized {
+    /// The state from a checkpoint's task bytes (`at` names the file for errors).
+    fn decode(task_state: Option<&[u8]>, at: &Path) -> Result<Self>;
+}
+
+impl RunState for () {
+    fn decode(_task_state: Option<&[u8]>, _at: &Path) -> Result<()> {
+        Ok(())
+    }
+}
+
 /// How a task starts: from the data (pretraining) or from a pretrained run (stylizing).
 pub enum Start<V: Variant> {
     /// Pretraining on freshly loaded data.
@@ -25,10 +55,13 @@ pub enum Start<V: Variant> {
 
 /// One variant of INS (NeRF, IDR, SIREN): the parts of a run that differ between them.
 pub trait Variant: Sized + 'static {
-    /// Lowercase name, as in `ins-cli train <name>`.
+    /// The name people read (NeRF, IDR, SIREN).
     const NAME: &'static str;
+    /// The name a run folder records in its `config.json` and commands take
+    /// (`ins-cli train <key>`): lowercase.
+    const KEY: &'static str;
     /// Flags and `config.json` of a run.
-    type Config: Clone + PartialEq + Default + Serialize + DeserializeOwned + clap::Args;
+    type Config: RunConfig;
     /// What a run learns from: a scene, or an image.
     type Data;
     /// The trained model.
@@ -39,18 +72,10 @@ pub trait Variant: Sized + 'static {
     type Task: Task<Model = Self::Model, Objective = Self::Objective>;
     /// What a run folder keeps beside the model (the task's state in a checkpoint, e.g. NeRF's
     /// occupancy grid), decoded when a run is loaded.
-    type Extra;
+    type Extra: RunState;
 
     /// Pretraining or stylizing, from the config (an error for contradictory sources).
     fn kind(cfg: &Self::Config) -> Result<RunKind>;
-    /// The paintings and patch settings.
-    fn style(cfg: &Self::Config) -> &StyleArgs;
-    /// The paintings and patch settings, to resolve.
-    fn style_mut(cfg: &mut Self::Config) -> &mut StyleArgs;
-    /// The pretrained run a stylizing config starts from.
-    fn base_run(cfg: &Self::Config) -> Option<&Path>;
-    /// The run's seed.
-    fn seed(cfg: &Self::Config) -> u64;
 
     /// Loads the data the config names (for a stylized run's config, its base's), writing back
     /// settings chosen from the data (an automatic downscale).
@@ -80,10 +105,6 @@ pub trait Variant: Sized + 'static {
         n_styles: usize,
         device: &Device,
     ) -> Self::Model;
-    /// The number of styles a model renders (0 without a stylizer).
-    fn n_styles(model: &Self::Model) -> usize;
-    /// The extra state of a run from its checkpoint's task state (`at` names the file).
-    fn decode_extra(task_state: Option<&[u8]>, at: &Path) -> Result<Self::Extra>;
 
     /// The task of a run, on the autodiff `device`, with the paintings' loss where the run
     /// stylizes.

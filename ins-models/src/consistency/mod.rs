@@ -3,205 +3,49 @@
 //! the Gram distance to the painting and the content distance to the pretrained render, and
 //! the depth kept from pretraining. Any set of frames of the same path (the stylized run, the
 //! pretrained run, a per-view 2D baseline) is scored on the same pixels.
+//!
+//! - [`evaluate`]: the whole evaluation of a stylized run, written into one folder;
+//! - [`texture_table`]: the painting's texture on the object per set of frames.
 
-use std::path::Path;
+pub mod evaluate;
+pub mod texture_table;
+
+pub use evaluate::{ConsistencyOptions, Evaluation, Progress, evaluate};
+
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::eval::consistency::{PairScore, PathGeometry, mean_rmse};
+use ins_core::eval::depth::DepthAgreement;
 use ins_core::imaging::RgbImage;
 use ins_core::loss::{content_loss, style_loss};
-use ins_core::render::sphere_tracing::TraceOptions;
-use ins_core::train::RunFolder;
 use ins_scene::camera::Camera;
-use ins_scene::data::Scene;
-use ins_scene::geometry::Vec3;
 use ins_scene::paths::{PathKind, path_for_scene};
 use serde::Serialize;
 use vgg_import::Vgg;
 
-use crate::idr::IdrRun;
-use crate::nerf::NerfRun;
-use crate::run::{StyleArgs, Variant};
+use crate::run::any::load_scene_run;
+use crate::run::scene_render::{PathFrame, SceneRender};
 
 /// The ranges scored: short (neighbouring frames) and long (seven frames apart).
 pub const RANGES: [usize; 2] = [1, 7];
 
-/// One rendered frame of a path, as the evaluation reads it.
-#[derive(Debug, Clone)]
-pub struct PathFrame {
-    /// The picture.
-    pub image: RgbImage,
-    /// The surface point each pixel sees, where it sees the object (NeRF: opacity above 0.5;
-    /// IDR: the ray meets the surface).
-    pub points: Vec<Option<Vec3>>,
-    /// The distance along each pixel's ray to that point.
-    pub depth: Vec<Option<f32>>,
-    /// The depth as a colour-mapped picture.
-    pub depth_picture: RgbImage,
-}
-
-impl PathFrame {
-    /// Pixels on the object.
-    pub fn object(&self) -> Vec<bool> {
-        self.points.iter().map(Option::is_some).collect()
-    }
-}
-
-/// A run that renders frames along a camera path: a NeRF or an IDR run.
-pub trait PathRender {
-    /// The run's scene.
-    fn scene(&self) -> &Scene;
-    /// Renders what `camera` sees under style `code` (`None`: unstylized).
-    fn frame(&self, camera: &Camera, code: Option<Tensor<2>>, device: &Device)
-    -> Result<PathFrame>;
-    /// The run's paintings and perceptual settings (empty for a pretrained run).
-    fn style(&self) -> &StyleArgs;
-    /// The pretrained run a stylized run started from.
-    fn base_run(&self) -> Option<&Path>;
-    /// A style code from mix weights (see `Run::code`).
-    fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>>;
-}
-
-impl PathRender for NerfRun {
-    fn scene(&self) -> &Scene {
-        &self.data.scene
-    }
-
-    fn frame(
-        &self,
-        camera: &Camera,
-        code: Option<Tensor<2>>,
-        device: &Device,
-    ) -> Result<PathFrame> {
-        let r = crate::nerf::eval::render_camera(
-            &self.model.valid(),
-            self.scene(),
-            camera,
-            self.sampling(),
-            code,
-            self.background(),
-            device,
-        )?;
-        let points = r.surface_points(self.scene(), camera);
-        let depth = (0..r.opacity.len())
-            .map(|i| (r.opacity[i] > 0.5).then(|| r.depth[i] / r.opacity[i]))
-            .collect();
-        Ok(PathFrame {
-            image: r.image(),
-            points,
-            depth,
-            depth_picture: r.depth_picture(),
-        })
-    }
-
-    fn style(&self) -> &StyleArgs {
-        &self.config.style
-    }
-
-    fn base_run(&self) -> Option<&Path> {
-        crate::nerf::Nerf::base_run(&self.config)
-    }
-
-    fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
-        crate::run::Run::code(self, mix, device)
-    }
-}
-
-impl PathRender for IdrRun {
-    fn scene(&self) -> &Scene {
-        &self.data
-    }
-
-    fn frame(
-        &self,
-        camera: &Camera,
-        code: Option<Tensor<2>>,
-        device: &Device,
-    ) -> Result<PathFrame> {
-        let r = crate::idr::eval::render_camera(
-            &self.model.valid(),
-            self.scene(),
-            camera,
-            code,
-            &TraceOptions::default(),
-            device,
-        )?;
-        let rays = ins_scene::rays::camera_rays(camera, |o, d| self.scene().ray_range(o, d));
-        let depth: Vec<Option<f32>> = (0..r.hit.len())
-            .map(|i| r.hit[i].then(|| r.depth[i]))
-            .collect();
-        let points = depth
-            .iter()
-            .enumerate()
-            .map(|(i, t)| t.map(|t| rays.point(i, t)))
-            .collect();
-        let opacity: Vec<f32> = r.hit.iter().map(|&h| if h { 1.0 } else { 0.0 }).collect();
-        let (lo, hi) = depth
-            .iter()
-            .flatten()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &d| {
-                (lo.min(d), hi.max(d))
-            });
-        let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
-        let depth_picture = ins_core::imaging::depth_image(
-            &r.depth
-                .iter()
-                .zip(&r.hit)
-                .map(|(d, h)| if *h { *d } else { 0.0 })
-                .collect::<Vec<_>>(),
-            &opacity,
-            r.width,
-            r.height,
-            lo,
-            hi,
-        );
-        Ok(PathFrame {
-            image: r.image(),
-            points,
-            depth,
-            depth_picture,
-        })
-    }
-
-    fn style(&self) -> &StyleArgs {
-        &self.config.style
-    }
-
-    fn base_run(&self) -> Option<&Path> {
-        crate::idr::Idr::base_run(&self.config)
-    }
-
-    fn code(&self, mix: Option<&[f32]>, device: &Device) -> Result<Option<Tensor<2>>> {
-        crate::run::Run::code(self, mix, device)
-    }
-}
-
-/// Loads the run folder `dir` of either 3D variant (told apart by its config).
-pub fn load_path_render(dir: &Path, device: &Device) -> Result<Box<dyn PathRender>> {
-    let config = RunFolder::new(dir).config();
-    Ok(if crate::nerf::NerfRunConfig::from_file(&config).is_ok() {
-        Box::new(NerfRun::load(dir, device)?)
-    } else if crate::idr::IdrRunConfig::from_file(&config).is_ok() {
-        Box::new(IdrRun::load(dir, device)?)
-    } else {
-        // Names the problem (no config, or a SIREN run) through the NeRF loader.
-        Box::new(NerfRun::load(dir, device)?)
-    })
-}
+/// What the evaluation does, for the error a SIREN run gets.
+const WHAT: &str = "view consistency";
 
 /// A stylized run folder and its pretrained run, of either variant.
 pub struct StylizedPair {
     /// The stylized run.
-    pub student: Box<dyn PathRender>,
+    pub student: Box<dyn SceneRender>,
     /// The pretrained run it started from.
-    pub teacher: Box<dyn PathRender>,
+    pub teacher: Box<dyn SceneRender>,
 }
 
 impl StylizedPair {
     /// Loads the stylized run `dir` (NeRF or IDR, told apart by its config) and its base.
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
-        let student = load_path_render(dir, device)?;
+        let student = load_scene_run(dir, device, WHAT)?;
         let Some(from) = student.base_run().map(Path::to_path_buf) else {
             bail!(
                 "{} is a pretrained run: view consistency is measured on a stylized run \
@@ -210,9 +54,21 @@ impl StylizedPair {
                 dir.display()
             );
         };
-        let teacher = load_path_render(&from, device)?;
-        let _ = teacher.scene();
+        let teacher = load_scene_run(&from, device, WHAT)?;
         Ok(Self { student, teacher })
+    }
+
+    /// The painting of style `style` (an index into the run's `--style` list).
+    pub fn painting(&self, style: usize) -> Result<&Path> {
+        let styles = &self.student.style().styles;
+        styles.get(style).map(PathBuf::as_path).with_context(|| {
+            format!(
+                "--style {style}: {} has {} style{}",
+                self.student.dir().display(),
+                styles.len(),
+                if styles.len() == 1 { "" } else { "s" }
+            )
+        })
     }
 
     /// The default path ([`ins_scene::paths::default_kind`]).
@@ -276,30 +132,12 @@ impl PathRenders {
         let n = self.cameras.len().max(1) as f64;
         let (mut err, mut agree) = (0.0, 0.0);
         for (s, t) in self.stylized.iter().zip(&self.pretrained) {
-            let (e, a) = depth_agreement(s, t);
-            err += e;
-            agree += a;
+            let d = DepthAgreement::of(&s.depth, &t.depth);
+            err += d.median_rel_error;
+            agree += d.agreement;
         }
         (err / n, agree / n)
     }
-}
-
-/// The median relative depth difference of two frames of one camera on pixels on the object in
-/// both, and the fraction of pixels where they agree on the object.
-pub fn depth_agreement(student: &PathFrame, teacher: &PathFrame) -> (f64, f64) {
-    let mut errors = Vec::new();
-    let mut agree = 0usize;
-    for (s, t) in student.depth.iter().zip(&teacher.depth) {
-        if s.is_some() == t.is_some() {
-            agree += 1;
-        }
-        if let (Some(s), Some(t)) = (s, t) {
-            errors.push(((s - t).abs() / t.abs().max(1e-6)) as f64);
-        }
-    }
-    errors.sort_by(f64::total_cmp);
-    let median = errors.get(errors.len() / 2).copied().unwrap_or(0.0);
-    (median, agree as f64 / student.depth.len().max(1) as f64)
 }
 
 /// How one set of frames scores.
