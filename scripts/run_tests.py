@@ -1,18 +1,27 @@
 #!/usr/bin/env python3
-"""Builds the workspace's tests once, then runs the test programs two at a time.
+"""Builds the workspace's tests and runs the test programs two at a time, in two lanes.
 
 `cargo test` runs its test programs one after another. Ours are uneven: the wgpu ones spend
-minutes on one core while Mesa's lavapipe compiles GPU kernels on the CPU, and the other core
-idles (measured on an AVX2-only EPYC: the suite averaged 1.4 of 2 cores, 37 minutes with cold
-caches). Here every test program cargo builds is a job; the slowest known ones start first and
-the rest fill whichever slot frees up, so a kernel compile overlaps the CPU tests.
+minutes on one core while Mesa's lavapipe compiles GPU kernels on the CPU. Here every test
+program cargo builds is a job, in one of two lanes:
 
-Nothing is skipped: the job list is what `cargo test --no-run` reports, plus the doc tests.
-Each program runs in its package's folder, as cargo runs it. Its output is printed whole when
-it ends; the summary names every failure and the script exits non-zero on any.
+- the lavapipe lane runs the programs that compile GPU kernels, one after another: Mesa keeps
+  each kernel's LLVM code on disk, so a program finds those the one before it compiled (with
+  empty caches on an Intel Xeon, 2 cores: wgpu_steps alone 605 s, then wgpu_cli 118 s where it
+  took 605 s when the two started side by side);
+- the CPU lane runs the others, slowest first.
+
+The lavapipe lane starts while cargo is still building, as soon as one of its programs is
+linked (the last minutes of a build are the test programs, one core's worth); the CPU lane
+starts when the build is done. A lane whose own jobs are finished takes the other lane's.
+
+Nothing is skipped: the job list is what cargo builds (`cargo test --no-run`), plus the doc
+tests of the libraries that have any. Each program runs in its package's folder, as cargo runs
+it. Its output is printed whole when it ends; the summary names every failure and the script
+exits non-zero on any.
 
 Usage: scripts/run_tests.py [-- ARGS FOR EVERY TEST PROGRAM, e.g. a name filter]
-Environment: INS_TEST_JOBS (programs at once, default 2).
+Environment: INS_TEST_JOBS (programs at once after the build, default 2).
 """
 
 import json
@@ -23,32 +32,85 @@ import sys
 import threading
 import time
 
-# The slowest test programs on a fresh machine (cold Mesa and CubeCL caches), slowest first:
-# starting them first keeps the last minutes from being one long program alone. Measured one
-# after another (`cargo test`) on an AVX2-only EPYC: wgpu_cli 691 s, vgg_import 435 s,
-# backends 298 s, capture_cli 198 s, report_cli 119 s, viewer_cli 113 s, nerf 106 s, idr 82 s;
-# then siren and nerf_cli (about 50 s each) before the many short ones. wgpu_steps (785 s alone
-# with empty caches) starts after backends: by then lavapipe has compiled most of its kernels
-# for wgpu_cli (the same small NeRF and IDR) and for backends (the same VGG sizes).
+# The programs that run wgpu on Mesa's lavapipe, in the order their lane runs them: the one
+# that compiles the kernels most others share (NeRF's and IDR's steps) first. Measured alone or
+# after the ones before them, empty caches, Intel Xeon: wgpu_steps 605 s, wgpu_cli 118 s,
+# backends 252 s, vgg_import 107 s, hash_grid 10 s.
+LAVAPIPE = ["wgpu_steps", "wgpu_cli", "backends", "vgg_import", "hash_grid"]
+
+# The slowest CPU programs, slowest first (same machine, beside the lavapipe lane): starting
+# them first keeps the last minutes from being one long program alone.
 SLOWEST_FIRST = [
-    "wgpu_cli",
-    "vgg_import",
-    "backends",
-    "wgpu_steps",
     "capture_cli",
-    "report_cli",
-    "viewer_cli",
     "nerf",
+    "viewer_cli",
+    "report_cli",
     "idr",
-    "siren",
     "nerf_cli",
+    "siren",
+    "stylize2d",
+    "cpu_fallback",
 ]
 
 RESULT = re.compile(r"test result: \w+\. (\d+) passed; (\d+) failed; (\d+) ignored")
 
 
-def build(root, args):
-    """Builds every test program; returns the jobs (name, label, argv with `args`, folder).
+def lane_of(name, label):
+    # `vgg_import` names both the crate's unit tests and its wgpu integration test.
+    return "lavapipe" if name in LAVAPIPE and " test " in label else "cpu"
+
+
+def rank(name, label):
+    order = LAVAPIPE if lane_of(name, label) == "lavapipe" else SLOWEST_FIRST
+    return order.index(name) if name in order and " lib " not in label else len(order)
+
+
+class Jobs:
+    """The jobs cargo has built so far, per lane, and whether the build is over."""
+
+    def __init__(self):
+        self.cond = threading.Condition()
+        self.pending = {"lavapipe": [], "cpu": []}
+        self.built = False
+        self.failed_build = False
+        self.all = []
+
+    def add(self, job):
+        with self.cond:
+            self.pending[lane_of(job[0], job[1])].append(job)
+            self.all.append(job)
+            self.cond.notify_all()
+
+    def finish_build(self, ok, extra):
+        with self.cond:
+            for job in extra:
+                self.pending[lane_of(job[0], job[1])].append(job)
+                self.all.append(job)
+            self.built = True
+            self.failed_build = not ok
+            self.cond.notify_all()
+
+    def take(self, lane):
+        """The next job for `lane`: its own, best ranked among those built; once the build is
+        over, the other lane's when its own are done. None when nothing is left (or the build
+        failed)."""
+        other = "cpu" if lane == "lavapipe" else "lavapipe"
+        with self.cond:
+            while True:
+                if self.failed_build:
+                    return None
+                for source in (lane, other) if self.built else (lane,):
+                    jobs = self.pending[source]
+                    if jobs:
+                        jobs.sort(key=lambda j: rank(j[0], j[1]))
+                        return jobs.pop(0)
+                if self.built:
+                    return None
+                self.cond.wait()
+
+
+def build(root, args, jobs):
+    """Runs `cargo test --no-run`, adding each test program to `jobs` as cargo reports it.
 
     `--timings` leaves cargo's build profile in target/cargo-timings/: where a slow CI build
     went, per crate."""
@@ -57,7 +119,6 @@ def build(root, args):
         "--message-format=json-render-diagnostics",
     ]
     proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, text=True)
-    jobs = []
     for line in proc.stdout:
         try:
             msg = json.loads(line)
@@ -71,22 +132,28 @@ def build(root, args):
         kind = target["kind"][0]
         package = os.path.dirname(msg["manifest_path"])
         label = f"{os.path.basename(package)} {kind} {target['name']}"
-        jobs.append((target["name"], label, [msg["executable"], *args], package))
-    if proc.wait() != 0:
-        sys.exit("the tests did not build (cargo's messages are above)")
-    return jobs
+        jobs.add((target["name"], label, [msg["executable"], *args], package))
+    ok = proc.wait() == 0
+    extra = []
+    # The doc tests of the libraries that have any (`doctest = false` marks those without):
+    # cargo builds and runs them itself.
+    documented = doc_tested_packages(root) if ok else []
+    if documented:
+        packages = [flag for p in documented for flag in ("-p", p)]
+        extra.append(("doc", "doc tests",
+                      ["cargo", "test", "--release", *packages, "--doc", "--", *args], root))
+    jobs.finish_build(ok, extra)
+    return ok
 
 
-def order(jobs):
-    """Slowest known first, then the rest in cargo's order (new programs included)."""
-
-    def rank(job):
-        name, label = job[0], job[1]
-        # `vgg_import` names both the crate's unit tests and its slow integration test.
-        slow = name in SLOWEST_FIRST and " lib " not in label
-        return SLOWEST_FIRST.index(name) if slow else len(SLOWEST_FIRST)
-
-    return sorted(jobs, key=rank)
+def doc_tested_packages(root):
+    """The workspace packages whose library runs doc tests (cargo's `doctest`, on unless
+    `[lib] doctest = false`)."""
+    meta = json.loads(subprocess.run(
+        ["cargo", "metadata", "--format-version", "1", "--no-deps"],
+        cwd=root, stdout=subprocess.PIPE, check=True, text=True).stdout)
+    return [p["name"] for p in meta["packages"]
+            if any("lib" in t["kind"] and t.get("doctest") for t in p["targets"])]
 
 
 def main():
@@ -94,49 +161,61 @@ def main():
     args = sys.argv[1:]
     if args[:1] == ["--"]:
         args = args[1:]
-    slots = int(os.environ.get("INS_TEST_JOBS", "2"))
-    jobs = order(build(root, args))
-    # The doc tests: cargo builds and runs them itself.
-    jobs.append(("doc", "doc tests",
-                 ["cargo", "test", "--release", "--workspace", "--doc", "--", *args], root))
+    slots = max(1, int(os.environ.get("INS_TEST_JOBS", "2")))
 
     started = time.monotonic()
-    pending = list(jobs)
+    jobs = Jobs()
     results = []
     lock = threading.Lock()
     running = set()
 
-    def worker():
-        while True:
-            with lock:
-                if not pending:
-                    return
-                name, label, argv, folder = pending.pop(0)
-                running.add(label)
-            t0 = time.monotonic()
-            proc = subprocess.run(argv, cwd=folder, stdout=subprocess.PIPE,
-                                  stderr=subprocess.STDOUT, text=True, errors="replace")
-            took = time.monotonic() - t0
-            counts = [0, 0, 0]
-            for m in RESULT.finditer(proc.stdout):
-                counts = [c + int(g) for c, g in zip(counts, m.groups())]
-            with lock:
-                running.discard(label)
-                results.append((label, proc.returncode, took, counts))
-                elapsed = time.monotonic() - started
-                print(f"\n===== {label}: exit {proc.returncode}, {took:.0f} s "
-                      f"(at {elapsed / 60:.1f} min) =====", flush=True)
-                print(proc.stdout, end="", flush=True)
-                if running:
-                    still = ", ".join(running)
-                    print(f"----- still running: {still}", flush=True)
+    def run(job):
+        name, label, argv, folder = job
+        with lock:
+            running.add(label)
+        t0 = time.monotonic()
+        proc = subprocess.run(argv, cwd=folder, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True, errors="replace")
+        took = time.monotonic() - t0
+        counts = [0, 0, 0]
+        for m in RESULT.finditer(proc.stdout):
+            counts = [c + int(g) for c, g in zip(counts, m.groups())]
+        with lock:
+            running.discard(label)
+            results.append((label, proc.returncode, took, counts))
+            elapsed = time.monotonic() - started
+            print(f"\n===== {label}: exit {proc.returncode}, {took:.0f} s "
+                  f"(at {elapsed / 60:.1f} min) =====", flush=True)
+            print(proc.stdout, end="", flush=True)
+            if running:
+                print(f"----- still running: {', '.join(running)}", flush=True)
 
-    print(f"running {len(jobs)} test programs, {slots} at a time", flush=True)
-    threads = [threading.Thread(target=worker) for _ in range(slots)]
+    def worker(lane, during_build):
+        if not during_build:
+            with jobs.cond:
+                while not jobs.built:
+                    jobs.cond.wait()
+        while True:
+            job = jobs.take(lane)
+            if job is None:
+                return
+            run(job)
+
+    # One lane runs during the build (the compiler has the other core); the others join when
+    # it ends.
+    lanes = ["lavapipe", "cpu"] + ["cpu"] * (slots - 2)
+    threads = [threading.Thread(target=worker, args=(lane, i == 0))
+               for i, lane in enumerate(lanes[:slots])]
     for t in threads:
         t.start()
+    build_ok = build(root, args, jobs)
+    build_seconds = time.monotonic() - started
+    print(f"built in {build_seconds / 60:.1f} min; running {len(jobs.all)} test programs, "
+          f"{slots} at a time", flush=True)
     for t in threads:
         t.join()
+    if not build_ok:
+        sys.exit("the tests did not build (cargo's messages are above)")
 
     total = [0, 0, 0]
     failed = []
@@ -148,10 +227,10 @@ def main():
         if code != 0:
             failed.append(label)
     wall = time.monotonic() - started
-    print(f"{total[0]} passed, {total[1]} failed, {total[2]} ignored "
-          f"in {wall / 60:.1f} min")
+    print(f"{total[0]} passed, {total[1]} failed, {total[2]} ignored in {wall / 60:.1f} min "
+          f"(build {build_seconds / 60:.1f} min)")
     # A job that never reported (its worker died) is a failure too, never a silent pass.
-    missing = [label for _, label, _, _ in jobs if label not in {r[0] for r in results}]
+    missing = [label for _, label, _, _ in jobs.all if label not in {r[0] for r in results}]
     failed += [f"{label} (did not run to the end)" for label in missing]
     if failed:
         print("failed: " + "; ".join(failed))

@@ -4,7 +4,8 @@
 # profile), so on a fresh machine Burn compiles once for both. The first run builds Burn
 # (20 to 45 minutes on 2 cores, by CPU) and fetches VGG-16 (65 MB) once.
 #
-#   bash scripts/test.sh                 every test, two test programs at a time (run_tests.py)
+#   bash scripts/test.sh                 every test, two test programs at a time in two lanes
+#                                        (lavapipe, CPU), the first starting during the build
 #   bash scripts/test.sh -- FILTER      the same, passing FILTER to every test program
 #   bash scripts/test.sh ARGS           plain `cargo test --release --workspace ARGS`
 set -euo pipefail
@@ -12,6 +13,10 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 # wgpu runs on Mesa's software Vulkan here: autotuning kernels there costs minutes and tells nothing.
 export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
+# ...and compiling them is most of the wgpu tests' time (LLVM inside Mesa): without its
+# optimisation passes a cold `backends` took 261 s instead of 300 (Intel Xeon, 2 cores). The
+# tests' kernels run on a few hundred values, where slower shader code costs nothing.
+export GALLIVM_PERF="${GALLIVM_PERF:-nopt}"
 if [ $# -eq 0 ] || [ "$1" = "--" ]; then
   python3 scripts/run_tests.py "$@"
 else

@@ -36,7 +36,7 @@ pub fn read_npy(path: &Path) -> Result<Array, DataError> {
 /// Reads every array of a `.npz` archive, keyed by name (without `.npy`).
 pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>, DataError> {
     let file = std::fs::File::open(path).map_err(|e| DataError::io(path, e))?;
-    let mut zip = npyz::zip::ZipArchive::new(std::io::BufReader::new(file))
+    let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file))
         .map_err(|e| DataError::npy(path, format!("not a zip archive: {e}")))?;
     let mut out = BTreeMap::new();
     for i in 0..zip.len() {
@@ -137,25 +137,29 @@ pub fn write_npy(path: &Path, shape: &[usize], data: &[f64]) -> Result<(), DataE
 
 /// Writes a `.npz` archive (uncompressed, like `numpy.savez`) of float64 arrays.
 pub fn write_npz(path: &Path, arrays: &[(String, Vec<usize>, Vec<f64>)]) -> Result<(), DataError> {
-    let mut npz = npyz::npz::NpzWriter::create(path).map_err(|e| DataError::io(path, e))?;
+    let file = std::fs::File::create(path).map_err(|e| DataError::io(path, e))?;
+    let mut npz = zip::ZipWriter::new(std::io::BufWriter::new(file));
+    let zip_error = |e: zip::result::ZipError| DataError::io(path, std::io::Error::other(e));
     for (name, shape, data) in arrays {
         let shape64: Vec<u64> = shape.iter().map(|&d| d as u64).collect();
-        let opts = npyz::zip::write::FileOptions::default()
-            .compression_method(npyz::zip::CompressionMethod::Stored);
-        let mut w = npz
-            .array::<f64>(name, opts)
-            .map_err(|e| DataError::io(path, e))?
+        let mut bytes = Vec::new();
+        let mut w = npyz::WriteOptions::<f64>::new()
             .default_dtype()
             .shape(&shape64)
+            .writer(&mut bytes)
             .begin_nd()
             .map_err(|e| DataError::io(path, e))?;
         w.extend(data.iter().copied())
             .map_err(|e| DataError::io(path, e))?;
         w.finish().map_err(|e| DataError::io(path, e))?;
+        let options = zip::write::SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Stored);
+        npz.start_file(format!("{name}.npy"), options)
+            .map_err(zip_error)?;
+        npz.write_all(&bytes).map_err(|e| DataError::io(path, e))?;
     }
-    npz.zip_writer()
-        .finish()
-        .map_err(|e| DataError::io(path, std::io::Error::other(e)))?
+    npz.finish()
+        .map_err(zip_error)?
         .flush()
         .map_err(|e| DataError::io(path, e))
 }
