@@ -43,7 +43,7 @@ pub struct IdrRunConfig {
     /// Share of each pretraining batch drawn from inside the masks (the rest uniformly over
     /// the images; 0: all uniform, as IDR). On scan37 about 60 % of uniform rays miss the
     /// object; 0.5 gave 17.49 dB held-out after 3000 steps against 17.68 (within a seed's
-    /// spread), and helped early with `--color-grid` (see the README).
+    /// spread), and helped early with `--color-grid` (docs/measurements.md).
     #[arg(long, default_value_t = 0.0)]
     pub mask_rays: f32,
     /// Pretraining: the learning rate falls exponentially to this fraction of `--lr` by the
@@ -68,7 +68,7 @@ pub struct IdrRunConfig {
     /// finer than the SDF's grid, which has to stay coarse for smooth normals, can hold. Its
     /// 16.8 M parameters make a step about a seventh longer (94 against 82 ms on scan37 at
     /// 400×300); on the full schedule it ended at 20.19 dB held-out with IoU 0.979, against the
-    /// defaults' 19.98 and 0.990 (see the README).
+    /// defaults' 19.98 and 0.990 (docs/measurements.md).
     #[arg(long, default_value_t = 0)]
     pub color_grid: u32,
     /// Weight of the mask loss (IDR: 100).
