@@ -62,6 +62,11 @@ impl SimConfig {
 }
 
 impl Sim {
+    /// How many styles its codes select among.
+    pub fn n_styles(&self) -> usize {
+        self.layers[0].weight.dims()[0]
+    }
+
     /// Output width.
     pub fn d_out(&self) -> usize {
         self.layers.last().map(|l| l.weight.dims()[1]).unwrap_or(0)

@@ -7,6 +7,7 @@ use burn::prelude::*;
 
 use super::encoding::FourierEncoding;
 use super::hash_grid::{HashGrid, HashGridConfig};
+use super::sim::{Sim, SimConfig};
 
 /// Learning-rate multiplier of the texture grid against the MLPs' rate: hash-grid entries each
 /// see few samples per step and learn at about ten times an MLP's rate (instant-ngp's 1e-2
@@ -52,6 +53,25 @@ impl StylePositionConfig {
             }),
         }
     }
+}
+
+/// The SIM a scene variant stylizes with, and how it sees positions: the authors' SIM (4
+/// layers `width` wide, the style code at every layer, the position from layer 2) reading
+/// `position`. The position module is drawn first, then the SIM.
+pub fn positional_sim(
+    n_styles: usize,
+    width: usize,
+    position: &StylePositionConfig,
+    device: &Device,
+) -> (StylePosition, Sim) {
+    let position = position.init(device);
+    let sim = SimConfig::new(n_styles)
+        .with_d_hidden(width)
+        .with_depth(4)
+        .with_code_every_layer(true)
+        .with_d_position(position.d_out())
+        .init(device);
+    (position, sim)
 }
 
 impl StylePosition {

@@ -6,8 +6,8 @@ use burn::prelude::*;
 use ins_core::modules::hash_grid::HashGridConfig;
 use ins_core::modules::radiance_am::FeatureBlend;
 use ins_core::modules::sdf::{SdfGridConfig, SdfMlpConfig, SdfNet};
-use ins_core::modules::sim::{Sim, SimConfig};
-use ins_core::modules::style_position::{StylePosition, StylePositionConfig};
+use ins_core::modules::sim::Sim;
+use ins_core::modules::style_position::{StylePosition, StylePositionConfig, positional_sim};
 use ins_core::modules::surface_color::{SurfaceColor, SurfaceColorConfig};
 use ins_core::train::{GroupSpec, Optimizable};
 use serde::{Deserialize, Serialize};
@@ -183,14 +183,7 @@ impl IdrModel {
         position: &StylePositionConfig,
         device: &Device,
     ) -> Self {
-        let position = position.init(device);
-        let d_pos = position.d_out();
-        let sim = SimConfig::new(n_styles)
-            .with_d_hidden(width)
-            .with_depth(4)
-            .with_code_every_layer(true)
-            .with_d_position(d_pos)
-            .init(device);
+        let (position, sim) = positional_sim(n_styles, width, position, device);
         let am = FeatureBlend::new(self.sdf.d_features(), width, width, 2, device);
         self.stylizer = Some(SurfaceStylizer { sim, am, position });
         self
@@ -198,9 +191,7 @@ impl IdrModel {
 
     /// Number of styles (0 without a stylizer).
     pub fn n_styles(&self) -> usize {
-        self.stylizer
-            .as_ref()
-            .map_or(0, |s| s.sim.layers[0].weight.dims()[0])
+        self.stylizer.as_ref().map_or(0, |s| s.sim.n_styles())
     }
 
     /// Colour at surface points `x [N, 3]` with normals `n [N, 3]`, seen along unit `dirs`,

@@ -44,17 +44,12 @@ impl SceneRender for IdrRun {
         })
     }
 
-    fn mesh(
-        &self,
-        options: MeshOptions,
-        code: Option<Tensor<2>>,
-        device: &Device,
-    ) -> Result<RunMesh> {
-        if options.level.is_some() {
+    fn mesh(&self, how: MeshOptions, code: Option<Tensor<2>>, device: &Device) -> Result<RunMesh> {
+        if how.level.is_some() {
             bail!("--level is a NeRF density; an IDR run is meshed at its SDF's zero set");
         }
         let started = std::time::Instant::now();
-        let (mesh, colors) = extract_mesh(&self.model.valid(), options.resolution, code, device)?;
+        let (mesh, colors) = extract_mesh(&self.model.valid(), how.resolution, code, device)?;
         Ok(RunMesh {
             mesh,
             colors,

@@ -10,8 +10,8 @@ use ins_core::modules::grid_field::GridGeometryConfig;
 use ins_core::modules::hash_grid::HashGridConfig;
 use ins_core::modules::mlp_field::MlpGeometryConfig;
 use ins_core::modules::radiance_am::{RadianceAm, RadianceAmConfig};
-use ins_core::modules::sim::{Sim, SimConfig};
-use ins_core::modules::style_position::{StylePosition, StylePositionConfig};
+use ins_core::modules::sim::Sim;
+use ins_core::modules::style_position::{StylePosition, StylePositionConfig, positional_sim};
 use ins_core::train::{GroupSpec, Optimizable};
 
 /// SIM and AM: what stylization adds to a pretrained field.
@@ -137,14 +137,7 @@ impl NerfModel {
         position: &StylePositionConfig,
         device: &Device,
     ) -> Self {
-        let position = position.init(device);
-        let d_pos = position.d_out();
-        let sim = SimConfig::new(n_styles)
-            .with_d_hidden(sim_width)
-            .with_depth(4)
-            .with_code_every_layer(true)
-            .with_d_position(d_pos)
-            .init(device);
+        let (position, sim) = positional_sim(n_styles, sim_width, position, device);
         let feature_depth = if self.coarse.is_some() { 4 } else { 2 };
         let am = RadianceAmConfig::new(self.field.geometry.d_features(), sim_width)
             .with_d_hidden(sim_width)
@@ -156,9 +149,7 @@ impl NerfModel {
 
     /// Number of styles (0 without a stylizer).
     pub fn n_styles(&self) -> usize {
-        self.stylizer
-            .as_ref()
-            .map_or(0, |s| s.sim.layers[0].weight.dims()[0])
+        self.stylizer.as_ref().map_or(0, |s| s.sim.n_styles())
     }
 
     /// Positions `[N, 3]` → `[-1, 1]³` over the scene box (the SIM's position input).

@@ -37,18 +37,13 @@ impl SceneRender for NerfRun {
         })
     }
 
-    fn mesh(
-        &self,
-        options: MeshOptions,
-        code: Option<Tensor<2>>,
-        device: &Device,
-    ) -> Result<RunMesh> {
+    fn mesh(&self, how: MeshOptions, code: Option<Tensor<2>>, device: &Device) -> Result<RunMesh> {
         let started = std::time::Instant::now();
         let m = extract_mesh(
             self,
             &self.model.valid(),
-            options.resolution,
-            options.level,
+            how.resolution,
+            how.level,
             code,
             device,
         )?;

@@ -209,22 +209,16 @@ impl<V: Variant> Run<V> {
                 V::NAME
             );
         }
-        crate::config::check_variant(&config_path, V::KEY).with_context(|| {
+        let not_this = || {
             format!(
                 "{} is not {} {} run",
                 dir.display(),
                 article(V::NAME),
                 V::NAME
             )
-        })?;
-        let config: V::Config = crate::config::read_json(&config_path).with_context(|| {
-            format!(
-                "{} is not {} {} run",
-                dir.display(),
-                article(V::NAME),
-                V::NAME
-            )
-        })?;
+        };
+        crate::config::check_variant(&config_path, V::KEY).with_context(not_this)?;
+        let config: V::Config = crate::config::read_json(&config_path).with_context(not_this)?;
         let base: Option<V::Config> = match V::kind(&config)? {
             RunKind::Pretrain => None,
             RunKind::Stylize => {
