@@ -200,16 +200,17 @@ pub fn turbo(t: f32) -> [f32; 3] {
 }
 
 /// The depth of the pixels that see a surface (`None` elsewhere, shown white) as a picture,
-/// colour-mapped over the range they span.
+/// colour-mapped over the range most of them span: the 2nd to the 98th percentile, so a few
+/// far pixels (a contracted background, a floater) do not squeeze the rest into one colour.
 pub fn surface_depth_image(depth: &[Option<f32>], width: usize, height: usize) -> RgbImage {
-    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-    for d in depth.iter().flatten() {
-        lo = lo.min(*d);
-        hi = hi.max(*d);
-    }
-    if !lo.is_finite() {
-        (lo, hi) = (0.0, 1.0);
-    }
+    let mut seen: Vec<f32> = depth.iter().flatten().copied().collect();
+    seen.sort_by(f32::total_cmp);
+    let at = |q: f64| seen[((seen.len() - 1) as f64 * q).round() as usize];
+    let (lo, hi) = if seen.is_empty() {
+        (0.0, 1.0)
+    } else {
+        (at(DEPTH_RANGE.0), at(DEPTH_RANGE.1))
+    };
     let opacity: Vec<f32> = depth
         .iter()
         .map(|d| if d.is_some() { 1.0 } else { 0.0 })
@@ -217,6 +218,9 @@ pub fn surface_depth_image(depth: &[Option<f32>], width: usize, height: usize) -
     let d: Vec<f32> = depth.iter().map(|d| d.unwrap_or(0.0)).collect();
     depth_image(&d, &opacity, width, height, lo, hi)
 }
+
+/// The share of surface pixels below which, and above which, depth pictures clip their colours.
+pub const DEPTH_RANGE: (f64, f64) = (0.02, 0.98);
 
 /// A depth map as a picture: `depth` divided by `opacity` where the opacity is above 0.5,
 /// mapped from `[near, far]` onto the turbo colours; transparent pixels are white.
@@ -241,5 +245,49 @@ pub fn depth_image(
         width,
         height,
         data,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_pictures_spread_their_colours_over_what_most_pixels_show() {
+        // 98 pixels at depths 1 to 2, two far ones (a contracted background), one empty.
+        let mut depth: Vec<Option<f32>> = (0..98).map(|i| Some(1.0 + i as f32 / 97.0)).collect();
+        depth.extend([Some(100.0), Some(100.0), None]);
+        let img = surface_depth_image(&depth, depth.len(), 1);
+        let px = |i: usize| [img.data[3 * i], img.data[3 * i + 1], img.data[3 * i + 2]];
+        assert_eq!(
+            px(0),
+            turbo(0.0),
+            "the nearest pixel takes the first colour"
+        );
+        assert_eq!(px(97), turbo(1.0), "the bulk's farthest takes the last");
+        assert_eq!(
+            px(98),
+            turbo(1.0),
+            "a far outlier is clipped, not given the range"
+        );
+        // Over the range of all pixels the bulk would sit within the first hundredth of the
+        // colours; here its middle pixel takes the middle colour.
+        let far = |a: [f32; 3], b: [f32; 3]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f32::max)
+        };
+        let mid = px(48);
+        assert!(
+            far(mid, turbo(0.5)) < 0.15,
+            "{mid:?} against {:?}",
+            turbo(0.5)
+        );
+        assert!(
+            far(mid, turbo(0.0)) > 0.3 && far(mid, turbo(1.0)) > 0.3,
+            "{mid:?}"
+        );
+        assert_eq!(px(100), [1.0, 1.0, 1.0], "no surface: white");
     }
 }

@@ -58,7 +58,8 @@ pub struct ConsistencyOptions {
     pub baseline_steps: usize,
     /// Adam learning rate of the 2D baseline, in pixel units.
     pub baseline_lr: f64,
-    /// Views of the path at which the texture is measured.
+    /// Views of the path at which the texture is measured (0: no texture measure, and no 2D
+    /// reference to converge).
     pub reference_views: usize,
     /// Steps of the converged 2D reference per view.
     pub reference_steps: usize,
@@ -262,28 +263,34 @@ pub fn evaluate(
     }
     sets.push(score("pretrained", &pretrained));
 
-    // Texture on the object, at a handful of views, against Gatys run to convergence there.
-    let views = reference_views(pretrained.len(), options.reference_views);
-    let r_started = std::time::Instant::now();
-    progress.note(&format!(
-        "converged 2D reference: {} views, {} steps each",
-        views.len(),
-        options.reference_steps
-    ));
-    let converged = gatys(options.reference_steps, REFERENCE_LR, &views, "reference2d")?;
-    let reference_seconds = r_started.elapsed().as_secs_f64();
-    let texture = TextureTable::score(
-        vgg,
-        &PaintingFeatures::new(vgg, &painting, style_args.style_size, device),
-        &renders,
-        &views,
-        TextureSets {
-            stylized: &stylized,
-            baseline: baseline.as_deref(),
-            converged: &converged,
-        },
-        device,
-    );
+    // Texture on the object, at a handful of views, against Gatys run to convergence there
+    // (none asked for: no texture measure).
+    let mut reference_seconds = 0.0;
+    let texture = if options.reference_views == 0 {
+        None
+    } else {
+        let views = reference_views(pretrained.len(), options.reference_views);
+        let r_started = std::time::Instant::now();
+        progress.note(&format!(
+            "converged 2D reference: {} views, {} steps each",
+            views.len(),
+            options.reference_steps
+        ));
+        let converged = gatys(options.reference_steps, REFERENCE_LR, &views, "reference2d")?;
+        reference_seconds = r_started.elapsed().as_secs_f64();
+        Some(TextureTable::score(
+            vgg,
+            &PaintingFeatures::new(vgg, &painting, style_args.style_size, device),
+            &renders,
+            &views,
+            TextureSets {
+                stylized: &stylized,
+                baseline: baseline.as_deref(),
+                converged: &converged,
+            },
+            device,
+        ))
+    };
 
     write_pairs(&out.join("pairs.jsonl"), &sets)?;
     write_views(&out.join("views.jsonl"), &sets)?;
@@ -300,7 +307,7 @@ pub fn evaluate(
         "depth_rel_error_median": depth_error,
         "opacity_agreement": round(opacity_agreement, 4),
         "sets": sets.iter().map(set_line).collect::<Vec<_>>(),
-        "texture": texture.to_json(),
+        "texture": texture.as_ref().map(TextureTable::to_json),
         "render_seconds": round(render_seconds, 1),
         "reference2d_seconds": round(reference_seconds, 1),
         "reference2d_steps": options.reference_steps,
@@ -320,10 +327,12 @@ pub fn evaluate(
         &out.join("summary.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    plot_strength_consistency(
-        &texture.strength_points(&sets),
-        &out.join("strength_consistency.png"),
-    )?;
+    if let Some(texture) = &texture {
+        plot_strength_consistency(
+            &texture.strength_points(&sets),
+            &out.join("strength_consistency.png"),
+        )?;
+    }
     Ok(Evaluation {
         out,
         summary,

@@ -75,7 +75,7 @@ fn density_at(
 }
 
 /// The median density at the surface points of up to [`LEVEL_VIEWS`] training views rendered
-/// at [`LEVEL_SIZE`] pixels (the level at which the mesh passes where renders put the surface).
+/// at [`LEVEL_SIZE`] pixels or their own size if smaller (the level at which the mesh passes where renders put the surface).
 pub fn surface_level(
     run: &NerfRun,
     model: &NerfModel,
@@ -87,7 +87,8 @@ pub fn surface_level(
     let mut points = Vec::new();
     for &v in &views {
         let cam = &scene.views[v].camera;
-        let s = LEVEL_SIZE as f32 / cam.width.max(cam.height) as f32;
+        // Never above the view's own size: a small capture's views say all they can at theirs.
+        let s = (LEVEL_SIZE as f32 / cam.width.max(cam.height) as f32).min(1.0);
         let cam = cam.resized(
             ((cam.width as f32 * s).round() as u32).max(8),
             ((cam.height as f32 * s).round() as u32).max(8),
