@@ -62,6 +62,10 @@ pub enum DataCommand {
         /// COLMAP: write the model as text instead of binary.
         #[arg(long)]
         text: bool,
+        /// transforms: every other photo cropped to portrait, with its own size and intrinsics
+        /// (a capture that mixes orientations).
+        #[arg(long)]
+        mixed_orientations: bool,
         /// Output folder (created).
         #[arg(long)]
         out: PathBuf,
@@ -129,10 +133,14 @@ pub fn run(cmd: DataCommand) -> Result<()> {
             format,
             layout,
             text,
+            mixed_orientations,
             out,
             size,
             views,
         } => {
+            if mixed_orientations && format != SceneFormat::Transforms {
+                bail!("--mixed-orientations is for --format transforms");
+            }
             let opts = SynthOptions { size, views };
             let layout = match layout.as_str() {
                 "object" => synthetic::CaptureLayout::ObjectCentred,
@@ -150,6 +158,10 @@ pub fn run(cmd: DataCommand) -> Result<()> {
                 SceneFormat::Transforms => synthetic::write_transforms(&out, &opts, layout)?,
                 _ => synthetic::write(format, &out, &opts)?,
             };
+            if mixed_orientations {
+                let cropped = synthetic::portrait_every_other(&out)?;
+                println!("{} photos cropped to portrait", cropped.len());
+            }
             println!(
                 "wrote a {format} scene with {} views to {}",
                 s.views.len(),

@@ -356,3 +356,83 @@ fn a_stylization_whose_colours_collapse_is_told_with_the_way_out() {
     );
     assert!(logged.iter().all(|&v| v > 0.5), "{logged:?}");
 }
+
+#[test]
+fn a_capture_mixing_portrait_and_landscape_photos_trains_evaluates_stylizes_and_renders() {
+    // Every view keeps its own size through rays, patches, evaluation and renders; a camera
+    // path is drawn at the first view's size, and the load says so.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene");
+    let o = ok(cli(&[
+        "data",
+        "synth",
+        "--format",
+        "transforms",
+        "--mixed-orientations",
+        "--out",
+        s(&scene),
+        "--size",
+        "32",
+        "--views",
+        "9",
+    ]));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("4 photos cropped to portrait"));
+    let run = dir.path().join("run");
+    let mut args = vec!["train", "nerf", "--scene", s(&scene), "--out", s(&run)];
+    assert_eq!(NERF_TINY[0], "--steps");
+    args.extend_from_slice(&NERF_TINY[2..]);
+    args.extend_from_slice(&["--steps", "6"]);
+    let o = ok(cli(&args));
+    assert!(
+        stderr(&o).contains("2 sizes (18×24, 32×24)"),
+        "{}",
+        stderr(&o)
+    );
+    // Held-out views 0 and 8 are landscape; view 1, a portrait one, renders at its own size.
+    ok(cli(&["eval", "nerf", "--run", s(&run)]));
+    let one = dir.path().join("one.png");
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&run),
+        "--view",
+        "1",
+        "--out",
+        s(&one),
+    ]));
+    assert_eq!(
+        image::GenericImageView::dimensions(&image::open(&one).unwrap()),
+        (18, 24)
+    );
+    let style = gradient_painting(&dir.path().join("style.png"));
+    let st = dir.path().join("stylized");
+    ok(stylize_nerf(
+        &run,
+        &[&style],
+        &st,
+        &["--steps", "2", "--patch", "12", "--style-size", "32"],
+    ));
+    let frames = dir.path().join("frames");
+    ok(cli(&[
+        "render",
+        "nerf",
+        "--run",
+        s(&st),
+        "--path",
+        "turntable",
+        "--frames",
+        "3",
+        "--out",
+        s(&frames),
+    ]));
+    for f in std::fs::read_dir(&frames).unwrap() {
+        let f = f.unwrap().path();
+        assert_eq!(
+            image::GenericImageView::dimensions(&image::open(&f).unwrap()),
+            (32, 24),
+            "{}",
+            f.display()
+        );
+    }
+}

@@ -218,6 +218,19 @@ impl Camera {
         self.rescaled(width, height, sx, sy)
     }
 
+    /// The same view through a frame of `width`×`height` pixels: focal lengths kept, the
+    /// principal point at the same offset from the frame's centre. How a camera path through
+    /// photos of different sizes (portrait and landscape) shares one frame size.
+    pub fn reframed(&self, width: u32, height: u32) -> Camera {
+        Camera {
+            width,
+            height,
+            cx: self.cx + 0.5 * (width as f32 - self.width as f32),
+            cy: self.cy + 0.5 * (height as f32 - self.height as f32),
+            ..self.clone()
+        }
+    }
+
     fn rescaled(&self, width: u32, height: u32, sx: f32, sy: f32) -> Camera {
         Camera {
             width,

@@ -140,7 +140,7 @@ pub fn arc_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
         o.elevation,
         covered,
         n,
-        first,
+        &first,
     ))
 }
 
@@ -166,8 +166,9 @@ pub struct SceneOrbit {
     pub start: f32,
 }
 
-/// The orbit of `scene`'s training cameras and the first of them; `None` without any.
-pub fn scene_orbit(scene: &Scene) -> Option<(SceneOrbit, &Camera)> {
+/// The orbit of `scene`'s training cameras and the first of them, at the size a camera path
+/// shares (the first view's: [`Camera::reframed`]); `None` without any.
+pub fn scene_orbit(scene: &Scene) -> Option<(SceneOrbit, Camera)> {
     let cams: Vec<&Camera> = scene
         .split(crate::data::Split::Train)
         .iter()
@@ -195,7 +196,8 @@ pub fn scene_orbit(scene: &Scene) -> Option<(SceneOrbit, &Camera)> {
         elevation,
         start,
     };
-    Some((orbit, first))
+    let (w, h) = scene.resolution();
+    Some((orbit, first.reframed(w, h)))
 }
 
 /// A turntable fitted to a scene's training cameras ([`scene_orbit`]). `None` when the scene
@@ -209,7 +211,7 @@ pub fn turntable_for_scene(scene: &Scene, n: usize) -> Option<Vec<Camera>> {
         o.elevation,
         o.start,
         n,
-        first,
+        &first,
     ))
 }
 
@@ -379,8 +381,16 @@ pub fn average_pose(cameras: &[Camera]) -> [[f32; 4]; 3] {
 }
 
 /// Smooth path through key cameras: `per_segment` frames from each key to the next (the key
-/// itself, then rotation by slerp, position and intrinsics linearly), then the last key.
+/// itself, then rotation by slerp, position and intrinsics linearly), then the last key. Every
+/// frame has the first key's size (keys of other sizes are [`Camera::reframed`] to it).
 pub fn interpolate(keys: &[Camera], per_segment: usize) -> Vec<Camera> {
+    let keys: Vec<Camera> = match keys.first() {
+        Some(k0) => keys
+            .iter()
+            .map(|k| k.reframed(k0.width, k0.height))
+            .collect(),
+        None => Vec::new(),
+    };
     let mut out = Vec::new();
     for pair in keys.windows(2) {
         let (a, b) = (&pair[0], &pair[1]);
@@ -425,7 +435,6 @@ pub fn plane_basis(up: Vec3) -> (Vec3, Vec3) {
     (e1, e2)
 }
 
-/// Percentile with linear interpolation (NumPy's default).
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -446,6 +455,27 @@ mod tests {
         // One camera: a gap of 360°, an arc of nothing.
         let (_, span) = covered_arc(&[deg(30.0)], ARC_MIN_GAP).unwrap();
         assert!(span.abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_path_through_portrait_and_landscape_photos_shares_the_first_ones_size() {
+        let identity = [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ];
+        let landscape = Camera::new(40, 30, 35.0, 35.0, 20.5, 14.5, identity);
+        let mut portrait = Camera::new(30, 40, 36.0, 36.0, 15.0, 21.0, identity);
+        portrait.c2w[0][3] = 1.0;
+        let path = interpolate(&[landscape.clone(), portrait.clone()], 4);
+        assert_eq!(path.len(), 5);
+        assert!(path.iter().all(|c| (c.width, c.height) == (40, 30)));
+        // The last key is the portrait view through the landscape frame: its focal length, its
+        // principal point as far from the centre as in its own frame, the same principal ray.
+        let last = path.last().unwrap();
+        assert_eq!((last.fx, last.cx - 20.0, last.cy - 15.0), (36.0, 0.0, 1.0));
+        let (a, b) = (portrait.ray(15.0, 21.0).1, last.ray(last.cx, last.cy).1);
+        assert!((a - b).length() < 1e-6, "{a} {b}");
     }
 
     #[test]

@@ -184,7 +184,7 @@ impl Variant for Idr {
             Start::From(base) => {
                 let perceptual = style.context("stylizing needs the paintings' loss")?;
                 let scene = base.data;
-                let (w, h) = scene.resolution();
+                let (w, h) = scene.smallest_resolution();
                 let patch = PatchSpec::spanning(
                     cfg.style.patch as u32,
                     cfg.style.stride as u32,

@@ -169,7 +169,7 @@ impl Variant for Nerf {
             Start::From(mut base) => {
                 let perceptual = style.context("stylizing needs the paintings' loss")?;
                 let scene = base.data.scene;
-                let (w, h) = scene.resolution();
+                let (w, h) = scene.smallest_resolution();
                 let patch = PatchSpec::spanning(
                     cfg.style.patch as u32,
                     cfg.style.stride as u32,

@@ -21,13 +21,18 @@ pub fn contact_sheet(scene: &Scene, max_views: usize, thumb_width: u32) -> Image
         };
     }
     let picks: Vec<usize> = (0..n).map(|k| k * n_all / n).collect();
-    let (w0, h0) = scene.resolution();
     let tw = thumb_width.max(8);
-    let th = ((tw as u64 * h0 as u64) / w0.max(1) as u64).max(1) as u32;
+    // Each thumbnail keeps its photo's shape (a capture may mix portrait and landscape); a row
+    // is as tall as the tallest.
+    let height_of = |vi: usize| {
+        let c = &scene.views[vi].camera;
+        ((tw as u64 * c.height as u64) / c.width.max(1) as u64).max(1) as u32
+    };
+    let row_height = picks.iter().map(|&vi| height_of(vi)).max().unwrap_or(1);
     let cols = (n as f32).sqrt().ceil() as u32;
     let rows = (n as u32).div_ceil(cols);
     let gap = 4;
-    let (sw, sh) = (cols * (tw + gap) + gap, rows * (th + gap) + gap);
+    let (sw, sh) = (cols * (tw + gap) + gap, rows * (row_height + gap) + gap);
     let mut sheet = Image {
         width: sw,
         height: sh,
@@ -35,6 +40,7 @@ pub fn contact_sheet(scene: &Scene, max_views: usize, thumb_width: u32) -> Image
     };
     for (k, &vi) in picks.iter().enumerate() {
         let view = &scene.views[vi];
+        let th = height_of(vi);
         let mut thumb = view.image.resized(tw, th);
         if let (Some(m), Some(_)) = (&view.mask, &view.mask_path) {
             for y in 0..th {
@@ -82,7 +88,7 @@ pub fn contact_sheet(scene: &Scene, max_views: usize, thumb_width: u32) -> Image
         }
         let (ox, oy) = (
             gap + (k as u32 % cols) * (tw + gap),
-            gap + (k as u32 / cols) * (th + gap),
+            gap + (k as u32 / cols) * (row_height + gap),
         );
         for y in 0..th {
             let src = ((y * tw) * 3) as usize;

@@ -267,11 +267,21 @@ impl Scene {
         ((mid - r).max(0.0), (mid + r).max(0.0))
     }
 
-    /// Size `(width, height)` of the first view, `(0, 0)` without views.
+    /// Size `(width, height)` of the first view, `(0, 0)` without views. A capture's views may
+    /// differ in size ([`Self::smallest_resolution`]); this is the size a camera path shares.
     pub fn resolution(&self) -> (u32, u32) {
         self.views
             .first()
             .map_or((0, 0), |v| (v.camera.width, v.camera.height))
+    }
+
+    /// The smallest width and the smallest height over the views (of a capture whose photos
+    /// differ in size or orientation): what a window drawn from any view must fit in.
+    /// `(0, 0)` without views.
+    pub fn smallest_resolution(&self) -> (u32, u32) {
+        let w = self.views.iter().map(|v| v.camera.width).min();
+        let h = self.views.iter().map(|v| v.camera.height).min();
+        (w.unwrap_or(0), h.unwrap_or(0))
     }
 
     /// Whether any view has a mask.

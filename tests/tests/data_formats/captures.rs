@@ -214,6 +214,104 @@ fn photos_a_transforms_json_names_but_lacks_are_left_out_and_said() {
 }
 
 #[test]
+fn a_stated_box_is_kept_before_a_plain_backdrop_and_unbounded_where_the_photos_show_a_room() {
+    // instant-ngp's aabb_scale boxes the subject; photos whose edges show a room need space
+    // past the cameras for it, photos before a plain backdrop do not.
+    let state_box = |d: &std::path::Path| {
+        let json = d.join("transforms.json");
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        v["aabb_scale"] = 1.into();
+        std::fs::write(&json, v.to_string()).unwrap();
+    };
+    let (room, _) = capture(
+        SceneFormat::Transforms,
+        CaptureLayout::ObjectCentred,
+        Encoding::Binary,
+    );
+    state_box(room.path());
+    let scene = load(room.path());
+    assert!(scene.contraction.is_some(), "a room boxed in");
+    assert_eq!(scene.notes.len(), 1, "{:?}", scene.notes);
+    assert!(
+        scene.notes[0].contains("aabb_scale 1") && scene.notes[0].contains("unbounded"),
+        "{}",
+        scene.notes[0]
+    );
+    let (studio, _) = capture(
+        SceneFormat::Transforms,
+        CaptureLayout::Studio,
+        Encoding::Binary,
+    );
+    state_box(studio.path());
+    let scene = load(studio.path());
+    assert!(scene.contraction.is_none(), "a plain backdrop unbounded");
+    assert!(scene.notes.is_empty(), "{:?}", scene.notes);
+    match scene.bounds {
+        Bounds::Aabb { min, max } => assert_eq!((min.x, max.x), (-1.5, 1.5)),
+        b => panic!("not the stated box: {b:?}"),
+    }
+}
+
+#[test]
+fn photos_of_different_sizes_and_orientations_keep_their_own() {
+    // Phones mix portrait and landscape, COLMAP's undistorter writes a size per photo: every
+    // view keeps its own size and intrinsics, and its rays are those of the photo it was cut
+    // from.
+    let (d, _) = capture(
+        SceneFormat::Transforms,
+        CaptureLayout::ObjectCentred,
+        Encoding::Binary,
+    );
+    let whole = load(d.path());
+    let cropped = synthetic::portrait_every_other(d.path()).unwrap();
+    let scene = load(d.path());
+    assert_eq!(scene.views.len(), whole.views.len());
+    let (w, h) = whole.resolution();
+    let cw = h * 3 / 4;
+    let x0 = (w - cw) / 2;
+    for i in 0..scene.views.len() {
+        let (v, orig) = (&scene.views[i], &whole.views[i]);
+        if !cropped.contains(&i) {
+            assert_eq!(v.camera, orig.camera, "view {i}");
+            continue;
+        }
+        assert_eq!((v.camera.width, v.camera.height), (cw, h), "view {i}");
+        for y in (0..h).step_by(3) {
+            for x in (0..cw).step_by(3) {
+                let (o, dir) = v.camera.pixel_ray(x, y);
+                let (oo, od) = orig.camera.pixel_ray(x + x0, y);
+                assert!(
+                    dist(o, oo) < 1e-5 && dist(dir, od) < 1e-5,
+                    "view {i} ({x}, {y})"
+                );
+                assert_eq!(v.image.rgb(x, y), orig.image.rgb(x + x0, y));
+            }
+        }
+    }
+    assert_eq!(scene.smallest_resolution(), (cw, h));
+    assert_eq!(scene.notes.len(), 1, "{:?}", scene.notes);
+    let note = &scene.notes[0];
+    assert!(
+        note.contains("2 sizes") && note.contains(&format!("{w}×{h}")) && note.contains("portrait"),
+        "{note}"
+    );
+    // Patches drawn from any view fit it; the contact sheet keeps each photo's shape.
+    let mut patches = PatchSampler::new(8, 2, 7);
+    for _ in 0..20 {
+        patches.sample(&scene, Split::Train).unwrap();
+    }
+    let sheet = contact_sheet(&scene, 9, 40);
+    assert_eq!(
+        sheet.height,
+        3 * (40 * h / cw) + 4 * 4,
+        "3 rows as tall as a portrait"
+    );
+    let report = check_scene(&scene);
+    assert!(report.all_ok(), "{:?}", report.checks);
+}
+
+#[test]
 fn forward_captures_frame_like_llff() {
     // The sparse points give the depth bounds: the nearest maps to 1/0.75, as LLFF's does.
     let (dir, synth) = capture(

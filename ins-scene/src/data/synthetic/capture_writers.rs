@@ -310,3 +310,49 @@ pub fn write_transforms(
         views,
     })
 }
+
+/// Turns every other photo of a capture [`write_transforms`] wrote (and its mask) into a
+/// portrait one: the centred window three quarters as wide as the photo is high, its own `w h
+/// cx cy` in its frame, as a phone mixing orientations or COLMAP's undistorter (a size per
+/// photo) writes them. Returns the indices of the cropped frames.
+pub fn portrait_every_other(dir: &Path) -> Result<Vec<usize>, DataError> {
+    let path = dir.join("transforms.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| DataError::io(&path, e))?;
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| DataError::json(&path, e.to_string()))?;
+    let (w, h) = (
+        doc["w"].as_u64().unwrap_or(0) as u32,
+        doc["h"].as_u64().unwrap_or(0) as u32,
+    );
+    let (cx, cy) = (
+        doc["cx"].as_f64().unwrap_or(0.0),
+        doc["cy"].as_f64().unwrap_or(0.0),
+    );
+    let cw = (h * 3 / 4).min(w);
+    let x0 = (w - cw) / 2;
+    let crop = |file: &Path| -> Result<(), DataError> {
+        let img = image::open(file).map_err(|e| DataError::invalid(file, e.to_string()))?;
+        img.crop_imm(x0, 0, cw, h)
+            .save(file)
+            .map_err(|e| DataError::invalid(file, e.to_string()))
+    };
+    let frames = doc["frames"]
+        .as_array_mut()
+        .ok_or_else(|| DataError::json(&path, "no frames".to_string()))?;
+    let mut cropped = Vec::new();
+    for (i, frame) in frames.iter_mut().enumerate().filter(|(i, _)| i % 2 == 1) {
+        crop(&dir.join(format!("images/frame_{i:05}.png")))?;
+        if frame.get("mask_path").is_some() {
+            crop(&dir.join(format!("masks/frame_{i:05}.png")))?;
+        }
+        frame["w"] = cw.into();
+        frame["h"] = h.into();
+        frame["cx"] = (cx - f64::from(x0)).into();
+        frame["cy"] = cy.into();
+        cropped.push(i);
+    }
+    let text =
+        serde_json::to_string_pretty(&doc).map_err(|e| DataError::json(&path, e.to_string()))?;
+    std::fs::write(&path, text).map_err(|e| DataError::io(&path, e))?;
+    Ok(cropped)
+}
