@@ -45,6 +45,7 @@ SLOWEST_FIRST = [
     "nerf",
     "viewer_cli",
     "report_cli",
+    "stylize_cli",
     "idr",
     "nerf_cli",
     "siren",

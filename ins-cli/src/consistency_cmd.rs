@@ -54,7 +54,7 @@ pub struct EvalConsistency {
     #[arg(long, default_value_t = BASELINE_LR)]
     pub baseline_lr: f64,
     /// Views of the path (spread evenly) at which the texture on the object is measured against
-    /// Gatys' method run to convergence.
+    /// Gatys' method run to convergence (0: no texture measure).
     #[arg(long, default_value_t = REFERENCE_VIEWS)]
     pub reference_views: usize,
     /// Optimisation steps of the converged 2D reference per view.

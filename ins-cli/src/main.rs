@@ -12,7 +12,9 @@ mod nerf_cmd;
 mod report_cmd;
 mod sfm_cmd;
 mod siren_cmd;
+mod stages;
 mod stylize2d_cmd;
+mod stylize_cmd;
 mod vgg_cmd;
 mod view_cmd;
 mod view_size;
@@ -36,6 +38,9 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// From a folder of photos and a painting to a video, a report and a mesh, in one command
+    /// (poses, pretraining, stylizing, outputs); run it again to continue where it stopped.
+    Stylize(stylize_cmd::Stylize),
     /// Train a stylized representation.
     Train {
         #[command(subcommand)]
@@ -143,6 +148,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
             EvalVariant::Idr(a) => idr_cmd::eval(a),
             EvalVariant::Consistency(a) => consistency_cmd::run(a),
         },
+        Command::Stylize(a) => stylize_cmd::run(a),
         Command::View(a) => view_cmd::run(a),
         Command::Export { command } => match command {
             ExportCommand::Mesh(a) => export_cmd::run(a),

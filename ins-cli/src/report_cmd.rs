@@ -128,35 +128,54 @@ fn last_with(run: &Path, key: &str) -> Option<Value> {
 }
 
 pub fn run(a: Report) -> Result<()> {
-    let eval_dir = a.run.join("consistency");
+    let e = &a.eval;
+    let options = ConsistencyOptions {
+        frames: e.frames,
+        size: e
+            .size
+            .as_deref()
+            .map(crate::common::parse_size)
+            .transpose()?,
+        baseline2d: e.baseline2d,
+        baseline_steps: e.baseline_steps,
+        reference_views: e.reference_views,
+        reference_steps: e.reference_steps,
+        ..ConsistencyOptions::default()
+    };
+    let device = e.device.device()?;
+    let page = write_report(
+        &a.run, &a.out, a.refresh, &options, &e.vgg, e.quiet, &device,
+    )?;
+    println!("{}", page.display());
+    Ok(())
+}
+
+/// Writes the report of the stylized run `run` into `out` (its `index.html`, returned, with
+/// the pictures beside it), first running the consistency evaluation with `options` when the
+/// run has none or `refresh` asks for it.
+pub fn write_report(
+    run: &Path,
+    out: &Path,
+    refresh: bool,
+    options: &ConsistencyOptions,
+    vgg: &crate::common::VggArgs,
+    quiet: bool,
+    device: &burn::prelude::Device,
+) -> Result<PathBuf> {
+    let eval_dir = run.join("consistency");
     let summary_path = eval_dir.join("summary.json");
-    if a.refresh || !summary_path.is_file() {
-        if !a.run.join("config.json").is_file() {
-            bail!("{} is not a run folder (no config.json)", a.run.display());
+    if refresh || !summary_path.is_file() {
+        if !run.join("config.json").is_file() {
+            bail!("{} is not a run folder (no config.json)", run.display());
         }
         eprintln!(
             "{} has no consistency evaluation yet: running it",
-            a.run.display()
+            run.display()
         );
-        let e = &a.eval;
-        let options = ConsistencyOptions {
-            frames: e.frames,
-            size: e
-                .size
-                .as_deref()
-                .map(crate::common::parse_size)
-                .transpose()?,
-            baseline2d: e.baseline2d,
-            baseline_steps: e.baseline_steps,
-            reference_views: e.reference_views,
-            reference_steps: e.reference_steps,
-            ..ConsistencyOptions::default()
-        };
-        let device = e.device.device()?;
-        let pair = StylizedPair::load(&a.run, &device)?;
-        let vgg = e.vgg.load(&device)?;
-        let mut progress = crate::consistency_cmd::CliProgress::new(e.quiet);
-        evaluate(&pair, &options, &vgg, &device, &mut progress)?;
+        let pair = StylizedPair::load(run, device)?;
+        let vgg = vgg.load(device)?;
+        let mut progress = crate::consistency_cmd::CliProgress::new(quiet);
+        evaluate(&pair, options, &vgg, device, &mut progress)?;
     }
     let summary: Value = serde_json::from_str(
         &std::fs::read_to_string(&summary_path)
@@ -169,49 +188,49 @@ pub fn run(a: Report) -> Result<()> {
             .context("the summary names no pretrained run")?,
     );
 
-    if a.out.exists() && !a.out.join("index.html").is_file() {
-        let empty = std::fs::read_dir(&a.out)
+    if out.exists() && !out.join("index.html").is_file() {
+        let empty = std::fs::read_dir(&out)
             .map(|mut d| d.next().is_none())
             .unwrap_or(false);
         if !empty {
             bail!(
                 "{} exists and is not a report (no index.html): choose another --out",
-                a.out.display()
+                out.display()
             );
         }
     }
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let mut shown = Vec::new();
     for (src, dst) in COPIED {
         let p = eval_dir.join(src);
         if p.is_file() {
-            copy(&p, &a.out.join(dst))?;
+            copy(&p, &out.join(dst))?;
             shown.push(*dst);
         }
     }
     let frames = summary["frames"].as_u64().unwrap_or(0) as usize;
-    side_by_side(&eval_dir, frames)?.save(&a.out.join("views.png"))?;
+    side_by_side(&eval_dir, frames)?.save(&out.join("views.png"))?;
     let mut curves = Vec::new();
-    for (run, name) in [
-        (&pretrained_run, "loss_pretrain.png"),
-        (&a.run, "loss_stylize.png"),
+    for (folder, name) in [
+        (pretrained_run.as_path(), "loss_pretrain.png"),
+        (run, "loss_stylize.png"),
     ] {
-        let p = run.join("loss_curve.png");
+        let p = folder.join("loss_curve.png");
         if p.is_file() {
-            copy(&p, &a.out.join(name))?;
+            copy(&p, &out.join(name))?;
             curves.push(name);
         }
     }
-    let mesh = report_mesh(&a.run, &a.out, &a.eval.device.device()?);
+    let mesh = report_mesh(run, out, device);
     if let Err(e) = &mesh {
         eprintln!("the report shows no mesh: {e}");
     }
-    let mut html = page(&a.run, &pretrained_run, &summary, &shown, &curves);
+    let mut html = page(run, &pretrained_run, &summary, &shown, &curves);
     let at = html.find("<h2>Files</h2>").unwrap_or(html.len());
     html.insert_str(at, &mesh_section(&mesh));
-    ins_io::write_atomic(&a.out.join("index.html"), html.as_bytes())?;
-    println!("{}", a.out.join("index.html").display());
-    Ok(())
+    let index = out.join("index.html");
+    ins_io::write_atomic(&index, html.as_bytes())?;
+    Ok(index)
 }
 
 /// Samples along the longest side of the report's mesh: a few megabytes the page embeds.

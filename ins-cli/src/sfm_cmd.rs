@@ -39,42 +39,106 @@ pub struct SfmArgs {
 
 /// Runs structure from motion and reports how many photos were registered.
 pub fn run(args: SfmArgs) -> Result<()> {
-    if !args.images.is_dir() {
-        bail!("{}: not a folder of photos", args.images.display());
+    let s = structure_from_motion(
+        &args.images,
+        &args.out,
+        &args.camera_model,
+        args.cache.as_deref(),
+    )?;
+    println!(
+        "registered {} of {} photos, {} points, mean reprojection error {:.2} px, in {:.0} s",
+        s.registered, s.photos, s.summary["points"], s.reprojection_error, s.seconds
+    );
+    if let Some(cam) = s.summary["cameras"].get(0) {
+        println!(
+            "camera   {} {}×{} {}",
+            cam["model"].as_str().unwrap_or("?"),
+            cam["width"],
+            cam["height"],
+            cam["params"]
+        );
     }
-    let photos = ins_scene::data::images::list_images(&args.images)?;
+    if !s.unregistered.is_empty() {
+        println!(
+            "not registered (left out of the scene): {}",
+            serde_json::to_string(&s.unregistered)?
+        );
+    }
+    if s.registered * 2 < s.photos {
+        eprintln!("warning: {FEW_REGISTERED}");
+    }
+    println!(
+        "wrote {} (check it with `ins-cli data check {}`)",
+        args.out.display(),
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// What to say when fewer than half the photos were registered.
+pub const FEW_REGISTERED: &str = "fewer than half of the photos were registered; take photos \
+     with more overlap (each spot seen from 3+ photos) and less motion blur";
+
+/// What structure from motion made of a folder of photos.
+pub struct Sfm {
+    /// Photos in the folder.
+    pub photos: usize,
+    /// Photos it posed.
+    pub registered: usize,
+    /// Names of the photos it could not pose.
+    pub unregistered: Vec<String>,
+    /// Mean reprojection error in pixels.
+    pub reprojection_error: f64,
+    /// Seconds it took.
+    pub seconds: f64,
+    /// The script's whole summary (points, cameras).
+    pub summary: serde_json::Value,
+}
+
+/// Poses the photos in `images` into the COLMAP workspace `out` (created), COLMAP's stages'
+/// own messages on stderr. Refuses a folder with fewer than 3 photos and a workspace that
+/// already holds a model.
+pub fn structure_from_motion(
+    images: &Path,
+    out: &Path,
+    camera_model: &str,
+    cache: Option<&Path>,
+) -> Result<Sfm> {
+    if !images.is_dir() {
+        bail!("{}: not a folder of photos", images.display());
+    }
+    let photos = ins_scene::data::images::list_images(images)?;
     if photos.len() < 3 {
         bail!(
             "{}: {} photos; structure from motion needs at least 3 overlapping ones (20–100 is typical)",
-            args.images.display(),
+            images.display(),
             photos.len()
         );
     }
-    if args.out.join("sparse/0").exists() {
+    if out.join("sparse/0").exists() {
         bail!(
             "{}: already holds a sparse model (sparse/0); choose another --out or remove it",
-            args.out.display()
+            out.display()
         );
     }
-    let python = environment(&vgg_import::source::cache_dir(args.cache.as_deref()))?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let script = args.out.join(".ins-sfm.py");
+    let python = environment(&vgg_import::source::cache_dir(cache))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let script = out.join(".ins-sfm.py");
     std::fs::write(&script, SCRIPT).with_context(|| format!("writing {}", script.display()))?;
     let t = Instant::now();
     let mut child = Command::new(&python)
         .arg(&script)
-        .args(["--images".as_ref(), args.images.as_os_str()])
-        .args(["--out".as_ref(), args.out.as_os_str()])
-        .args(["--camera-model", &args.camera_model])
+        .args(["--images".as_ref(), images.as_os_str()])
+        .args(["--out".as_ref(), out.as_os_str()])
+        .args(["--camera-model", camera_model])
         // COLMAP's own log is thousands of INFO lines; warnings and errors still show.
         .env("GLOG_minloglevel", "1")
         .stdout(Stdio::piped())
         .spawn()
         .with_context(|| format!("running {}", python.display()))?;
     let mut summary = None;
-    if let Some(out) = child.stdout.take() {
-        for line in BufReader::new(out).lines() {
+    if let Some(stdout) = child.stdout.take() {
+        for line in BufReader::new(stdout).lines() {
             let line = line?;
             match line.strip_prefix("SUMMARY ") {
                 Some(json) => summary = serde_json::from_str::<serde_json::Value>(json).ok(),
@@ -87,47 +151,25 @@ pub fn run(args: SfmArgs) -> Result<()> {
     if !status.success() {
         bail!(
             "structure from motion on {} failed ({status}); see the messages above",
-            args.images.display()
+            images.display()
         );
     }
     let s = summary.context("the SfM script ended without its summary")?;
-    let (reg, total) = (
-        s["registered"].as_u64().unwrap_or(0),
-        s["photos"].as_u64().unwrap_or(0),
-    );
-    println!(
-        "registered {reg} of {total} photos, {} points, mean reprojection error {:.2} px, in {:.0} s",
-        s["points"],
-        s["reprojection_error_px"].as_f64().unwrap_or(f64::NAN),
-        t.elapsed().as_secs_f64()
-    );
-    if let Some(cam) = s["cameras"].get(0) {
-        println!(
-            "camera   {} {}×{} {}",
-            cam["model"].as_str().unwrap_or("?"),
-            cam["width"],
-            cam["height"],
-            cam["params"]
-        );
-    }
-    if let Some(list) = s["unregistered"].as_array().filter(|l| !l.is_empty()) {
-        println!(
-            "not registered (left out of the scene): {}",
-            serde_json::to_string(list)?
-        );
-    }
-    if reg * 2 < total {
-        eprintln!(
-            "warning: fewer than half of the photos were registered; take photos with more \
-             overlap (each spot seen from 3+ photos) and less motion blur"
-        );
-    }
-    println!(
-        "wrote {} (check it with `ins-cli data check {}`)",
-        args.out.display(),
-        args.out.display()
-    );
-    Ok(())
+    Ok(Sfm {
+        photos: s["photos"].as_u64().unwrap_or(0) as usize,
+        registered: s["registered"].as_u64().unwrap_or(0) as usize,
+        unregistered: s["unregistered"]
+            .as_array()
+            .map(|l| {
+                l.iter()
+                    .filter_map(|v| v.as_str().map(str::to_string))
+                    .collect()
+            })
+            .unwrap_or_default(),
+        reprojection_error: s["reprojection_error_px"].as_f64().unwrap_or(f64::NAN),
+        seconds: t.elapsed().as_secs_f64(),
+        summary: s,
+    })
 }
 
 /// The environment's Python, creating the environment and installing pycolmap on first use.

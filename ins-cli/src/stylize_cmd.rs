@@ -1,0 +1,616 @@
+//! `ins-cli stylize`: from a folder of photos and a painting to a video, a report and a mesh in
+//! one command. It runs the stages a user would otherwise chain by hand (`data sfm`,
+//! `train nerf|idr --scene`, `train … --from … --style`, `eval consistency`, `report`,
+//! `export mesh`) into one folder:
+//!
+//! ```text
+//! OUT/stylize.json   what each stage ran on and whether it finished (see `stages`)
+//! OUT/scene/         poses from structure from motion, for plain photos
+//! OUT/pretrained/    the scene learned from its photos
+//! OUT/stylized/      the same in the painting's style
+//! OUT/renders/       the camera path as MP4 (GIF without ffmpeg), the stylized mesh
+//! OUT/report/        one HTML page: painting, views, animations, depth, numbers
+//! ```
+//!
+//! Running the same command again continues where it stopped: finished stages are kept, a
+//! killed training resumes from its checkpoint, and a changed input redoes only what depends
+//! on it (another painting keeps the poses and the pretraining).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use ins_core::imaging::RgbImage;
+use ins_models::consistency::ConsistencyOptions;
+use ins_models::idr::{Idr, IdrRunConfig};
+use ins_models::mesh_export::{MeshFormat, export_mesh};
+use ins_models::nerf::{Nerf, NerfRunConfig};
+use ins_models::run::scene::load_scene;
+use ins_models::run::{MeshOptions, RunKind};
+use ins_models::video::{FrameOutput, ffmpeg_available, write_frames};
+use ins_scene::data::SceneFormat;
+use ins_scene::data::images::list_images;
+
+use crate::common::{DeviceArgs, RunArgs, TrainCommand, VggArgs};
+use crate::stages::{Fingerprint, Manifest, StageStart};
+
+/// Fewest photos worth posing and training on: below this structure from motion rarely
+/// registers enough of them, and a held-out view or two leaves too few to learn from.
+pub const MIN_PHOTOS: usize = 8;
+
+/// Free disk space a run needs: two runs' checkpoints (tens of MB each), the posed photos'
+/// copies and the frames of the video and report, with room to spare.
+const MIN_FREE_BYTES: u64 = 1 << 30;
+
+/// How much slower a stylizing step is than a pretraining step of the same scene (a VGG-16
+/// pass forward and back per patch): lego at 200² on 2 cores, 0.46 s against 1.1 s a step
+/// (docs/results.md). Only for the estimate of what is left.
+const STYLIZE_STEP_COST: f64 = 2.4;
+
+#[derive(Args, Debug)]
+pub struct Stylize {
+    /// Photos of one scene: a folder of plain photos (posed by structure from motion), or a
+    /// scene folder (a COLMAP workspace, a transforms.json capture, Blender, LLFF, DTU).
+    #[arg(long, value_name = "DIR")]
+    photos: PathBuf,
+    /// A painting; repeat for several, learned in one model and mixed at will when rendering.
+    #[arg(long = "style", value_name = "IMAGE", required = true)]
+    styles: Vec<PathBuf>,
+    /// Output folder: scene/, pretrained/, stylized/, renders/, report/ (see `ins-cli stylize
+    /// --help`); running the same command again continues in it.
+    #[arg(long)]
+    out: PathBuf,
+    /// Reconstruct a surface (IDR) instead of a radiance field: the photos need object masks.
+    #[arg(long)]
+    surface: bool,
+    /// A preview, to choose a painting: a quarter of the steps, images half as large, half the
+    /// frames, in about a quarter of the time.
+    #[arg(long)]
+    quick: bool,
+    /// Pretraining steps (default: the variant's for the scene; --quick: a quarter).
+    #[arg(long)]
+    pretrain_steps: Option<usize>,
+    /// Stylization steps (default: the variant's; --quick: a quarter).
+    #[arg(long)]
+    stylize_steps: Option<usize>,
+    /// Image downscale factor (default: the long side near 400 px; --quick: near 200).
+    #[arg(long)]
+    downscale: Option<u32>,
+    /// Frames of the video (and of the report's views).
+    #[arg(long, default_value_t = 60)]
+    frames: usize,
+    /// Samples along the longest side of the mesh's grid.
+    #[arg(long, default_value_t = 256)]
+    mesh_resolution: usize,
+    /// COLMAP camera model for plain photos.
+    #[arg(long, default_value = "SIMPLE_RADIAL")]
+    camera_model: String,
+    /// No progress bars.
+    #[arg(long)]
+    quiet: bool,
+    #[command(flatten)]
+    device: DeviceArgs,
+    #[command(flatten)]
+    vgg: VggArgs,
+}
+
+/// The configuration of a stage's run, of either variant.
+enum AnyConfig<'a> {
+    Nerf(&'a NerfRunConfig),
+    Idr(&'a IdrRunConfig),
+}
+
+/// The stages, in order.
+const STAGES: [&str; 4] = ["poses", "pretrain", "stylize", "outputs"];
+
+/// What the photos folder holds.
+enum Photos {
+    /// Plain photos, to pose.
+    Plain(Vec<PathBuf>),
+    /// A scene folder of a known format.
+    Scene(SceneFormat),
+}
+
+impl Stylize {
+    /// The settings a preview scales down: a quarter of the steps (0: the variant's default,
+    /// itself scaled at resolve time through `steps_or_quarter`), the long side near 200 px.
+    fn downscale(&self, photos_dir: &Path) -> Result<u32> {
+        if let Some(d) = self.downscale {
+            return Ok(d);
+        }
+        if !self.quick {
+            return Ok(0);
+        }
+        let (w, h) = ins_scene::data::Scene::probe_resolution(photos_dir)?;
+        Ok(ins_models::run::scene::auto_downscale(
+            w,
+            h,
+            ins_models::run::scene::DEFAULT_LONG_SIDE / 2,
+        ))
+    }
+
+    /// `steps`, or the variant's `default` (a quarter of it with --quick).
+    fn steps(&self, steps: Option<usize>, default: usize) -> usize {
+        steps.unwrap_or(if self.quick {
+            default.div_ceil(4)
+        } else {
+            default
+        })
+    }
+
+    /// Trains `cfg` into `out` as `ins-cli train` does (resuming where `resume` says); its steps.
+    fn train_stage(
+        &self,
+        out: &Path,
+        resume: bool,
+        cfg: AnyConfig,
+        what: &str,
+        next: &str,
+    ) -> Result<usize> {
+        let run = RunArgs {
+            config: None,
+            resume,
+            quiet: self.quiet,
+        };
+        let cmd = TrainCommand {
+            out,
+            run: &run,
+            device: &self.device,
+            vgg: &self.vgg,
+        };
+        Ok(match cfg {
+            AnyConfig::Nerf(c) => {
+                cmd.train::<Nerf>(c, c.schedule.checkpoint_every, what, next)?
+                    .steps
+            }
+            AnyConfig::Idr(c) => {
+                cmd.train::<Idr>(c, c.schedule.checkpoint_every, what, next)?
+                    .steps
+            }
+        })
+    }
+
+    fn frames(&self) -> usize {
+        let frames = if self.quick {
+            self.frames.div_ceil(2)
+        } else {
+            self.frames
+        };
+        // The report's consistency measure compares frames seven apart.
+        frames.max(8)
+    }
+}
+
+pub fn run(a: Stylize) -> Result<()> {
+    let started = Instant::now();
+    // Everything a long stage would stop on is checked first.
+    for s in &a.styles {
+        RgbImage::load(s).with_context(|| format!("--style {}", s.display()))?;
+    }
+    let photos = what_photos(&a.photos)?;
+    check_free_space(&a.out)?;
+    let backend = a.device.backend.resolve();
+    let device = backend.try_device()?;
+    let variant = if a.surface { "IDR" } else { "NeRF" };
+    let mut manifest = Manifest::load(&a.out)?;
+
+    let painting_names: Vec<String> = a.styles.iter().map(|p| p.display().to_string()).collect();
+    eprintln!(
+        "stylizing {} with {} into {} on {backend}{}",
+        a.photos.display(),
+        painting_names.join(", "),
+        a.out.display(),
+        if a.quick {
+            " (a quick preview: a quarter of the steps, images half as large)"
+        } else {
+            ""
+        }
+    );
+    let first = if matches!(photos, Photos::Plain(_)) {
+        0
+    } else {
+        1
+    };
+    let plan: Vec<&str> = STAGES[first..].to_vec();
+    eprintln!(
+        "stages: {}",
+        plan.iter()
+            .enumerate()
+            .map(|(i, s)| format!("{} {}", i + 1, describe(s, variant)))
+            .collect::<Vec<_>>()
+            .join(" · ")
+    );
+    let counter = StageCounter {
+        plan: plan.clone(),
+        started,
+    };
+
+    // 1. Poses (plain photos only).
+    let (scene_dir, scene_print) = match &photos {
+        Photos::Plain(files) => {
+            let inputs = Fingerprint::new()
+                .text(&a.camera_model)
+                .files(files)
+                .context("reading the photos")?;
+            let dir = a.out.join("scene");
+            let t = Instant::now();
+            if counter.begin("poses", &manifest, inputs) != StageStart::Kept {
+                // Structure from motion has no checkpoint: a stopped one starts again, unless
+                // it had written its model before it stopped.
+                if !dir.join("sparse/0").exists()
+                    || manifest.start_of("poses", inputs) == StageStart::Fresh
+                {
+                    remove(&dir)?;
+                }
+                manifest.begin("poses", inputs)?;
+                if !dir.join("sparse/0").exists() {
+                    let sfm = crate::sfm_cmd::structure_from_motion(
+                        &a.photos,
+                        &dir,
+                        &a.camera_model,
+                        a.vgg.cache.as_deref(),
+                    )?;
+                    if sfm.registered < MIN_PHOTOS {
+                        bail!(
+                            "{}: structure from motion posed {} of {} photos ({} needed); {}",
+                            a.photos.display(),
+                            sfm.registered,
+                            sfm.photos,
+                            MIN_PHOTOS,
+                            crate::sfm_cmd::FEW_REGISTERED
+                        );
+                    }
+                    eprintln!(
+                        "posed {} of {} photos (mean reprojection error {:.2} px){}",
+                        sfm.registered,
+                        sfm.photos,
+                        sfm.reprojection_error,
+                        if sfm.unregistered.is_empty() {
+                            String::new()
+                        } else {
+                            format!("; left out: {}", sfm.unregistered.join(", "))
+                        }
+                    );
+                }
+                manifest.finish("poses", t.elapsed().as_secs_f64())?;
+            }
+            counter.end("poses", &manifest, None);
+            (dir, inputs)
+        }
+        Photos::Scene(format) => {
+            let inputs = Fingerprint::new()
+                .text(&format!("{format}"))
+                .files(&scene_files(&a.photos, &a.out)?)
+                .context("reading the scene")?;
+            (a.photos.clone(), inputs)
+        }
+    };
+
+    // 2. Pretraining.
+    let downscale = a.downscale(&scene_dir)?;
+    let pretrained = a.out.join("pretrained");
+    let pretrain_inputs = scene_print
+        .text(variant)
+        .text(&format!("{:?} {downscale}", a.pretrain_steps))
+        .text(&a.quick.to_string());
+    let mut pretrain_seconds_per_step = None;
+    {
+        let t = Instant::now();
+        let start = counter.begin("pretrain", &manifest, pretrain_inputs);
+        if start != StageStart::Kept {
+            if start == StageStart::Fresh {
+                remove(&pretrained)?;
+            }
+            manifest.begin("pretrain", pretrain_inputs)?;
+            let resume = start == StageStart::Resumed && pretrained.join("checkpoints").is_dir();
+            let what = format!("pretraining {variant} on {}", scene_dir.display());
+            let next = "then stylizing";
+            let steps = if a.surface {
+                let mut cfg = IdrRunConfig::default();
+                cfg.source.scene = Some(scene_dir.clone());
+                cfg.source.downscale = downscale;
+                cfg.schedule.steps = a.steps(a.pretrain_steps, cfg.steps_for(RunKind::Pretrain));
+                a.train_stage(&pretrained, resume, AnyConfig::Idr(&cfg), &what, next)?
+            } else {
+                let mut cfg = NerfRunConfig::default();
+                cfg.source.scene = Some(scene_dir.clone());
+                cfg.source.downscale = downscale;
+                if a.quick && a.pretrain_steps.is_none() {
+                    // A quarter of the scene's default, which depends on how it is framed.
+                    let (scene, _, _) = load_scene(&scene_dir, downscale, None)?;
+                    cfg.schedule.steps =
+                        a.steps(None, cfg.pretrain_steps_for(scene.forward_facing));
+                } else {
+                    cfg.schedule.steps = a.pretrain_steps.unwrap_or(0);
+                }
+                a.train_stage(&pretrained, resume, AnyConfig::Nerf(&cfg), &what, next)?
+            };
+            let seconds = t.elapsed().as_secs_f64();
+            pretrain_seconds_per_step = Some(seconds / steps.max(1) as f64);
+            manifest.finish("pretrain", seconds)?;
+        }
+        let stylize_steps = a.steps(a.stylize_steps, if a.surface { 400 } else { 600 });
+        let estimate =
+            pretrain_seconds_per_step.map(|s| s * stylize_steps as f64 * STYLIZE_STEP_COST);
+        counter.end("pretrain", &manifest, estimate);
+    }
+
+    // 3. Stylization.
+    let stylized = a.out.join("stylized");
+    let stylize_inputs = pretrain_inputs
+        .files(&a.styles)
+        .context("reading the paintings")?
+        .text(&format!("{:?}", a.stylize_steps));
+    {
+        let t = Instant::now();
+        let start = counter.begin("stylize", &manifest, stylize_inputs);
+        if start != StageStart::Kept {
+            if start == StageStart::Fresh {
+                remove(&stylized)?;
+            }
+            manifest.begin("stylize", stylize_inputs)?;
+            let resume = start == StageStart::Resumed && stylized.join("checkpoints").is_dir();
+            let what = format!("stylizing {variant} with {}", painting_names.join(", "));
+            let next = "then the video, the report and the mesh";
+            if a.surface {
+                let mut cfg = IdrRunConfig::default();
+                cfg.source.from = Some(pretrained.clone());
+                cfg.style.styles = a.styles.clone();
+                cfg.schedule.steps = a.steps(a.stylize_steps, cfg.steps_for(RunKind::Stylize));
+                a.train_stage(&stylized, resume, AnyConfig::Idr(&cfg), &what, next)?;
+            } else {
+                let mut cfg = NerfRunConfig::default();
+                cfg.source.from = Some(pretrained.clone());
+                cfg.style.styles = a.styles.clone();
+                cfg.schedule.steps = a.steps(a.stylize_steps, cfg.steps_for(RunKind::Stylize));
+                a.train_stage(&stylized, resume, AnyConfig::Nerf(&cfg), &what, next)?;
+            }
+            manifest.finish("stylize", t.elapsed().as_secs_f64())?;
+        }
+        counter.end("stylize", &manifest, None);
+    }
+
+    // 4. What a user shares: the video, the report, the mesh.
+    let renders = a.out.join("renders");
+    let report = a.out.join("report");
+    let frames = a.frames();
+    let outputs_inputs = stylize_inputs.text(&format!("{frames} {}", a.mesh_resolution));
+    {
+        let t = Instant::now();
+        let start = counter.begin("outputs", &manifest, outputs_inputs);
+        if start != StageStart::Kept {
+            remove(&renders)?;
+            remove(&report)?;
+            manifest.begin("outputs", outputs_inputs)?;
+            // The report's evaluation renders the camera path with the stylized run and its
+            // pretrained run; the video is its stylized frames. The texture measure against a
+            // converged 2D result costs minutes per view: `eval consistency` runs it on demand.
+            let options = ConsistencyOptions {
+                frames,
+                reference_views: 0,
+                ..ConsistencyOptions::default()
+            };
+            crate::report_cmd::write_report(
+                &stylized, &report, true, &options, &a.vgg, a.quiet, &device,
+            )?;
+            write_video(&stylized, &renders)?;
+            let mesh = MeshOptions {
+                resolution: a.mesh_resolution,
+                level: None,
+            };
+            // The report meshed the run already (at its own size): where it found no surface,
+            // neither would a finer grid, and the report has said why.
+            let glb = renders.join("stylized.glb");
+            if report.join("mesh.glb").is_file() {
+                if let Err(e) = export_mesh(&stylized, mesh, None, MeshFormat::Glb, &glb, &device) {
+                    eprintln!("no mesh: {e:#}");
+                }
+            }
+            manifest.finish("outputs", t.elapsed().as_secs_f64())?;
+        }
+        counter.end("outputs", &manifest, None);
+    }
+    let video = find_video(&renders).context("the outputs stage wrote no video")?;
+
+    println!(
+        "{}",
+        serde_json::json!({
+            "out": a.out,
+            "video": video,
+            "report": report.join("index.html"),
+            "mesh": renders.join("stylized.glb").is_file().then(|| renders.join("stylized.glb")),
+            "stylized_run": stylized,
+            "seconds": (started.elapsed().as_secs_f64() * 10.0).round() / 10.0,
+        })
+    );
+    eprintln!("\ndone in {}:", minutes(started.elapsed().as_secs_f64()));
+    eprintln!("  video    {}", video.display());
+    eprintln!(
+        "  report   {} (open it in a browser)",
+        report.join("index.html").display()
+    );
+    let glb = renders.join("stylized.glb");
+    if glb.is_file() {
+        eprintln!(
+            "  mesh     {} (Blender, three.js, Windows' 3D Viewer)",
+            glb.display()
+        );
+    }
+    eprintln!(
+        "  look around it: ins-cli view --run {}",
+        stylized.display()
+    );
+    Ok(())
+}
+
+/// A stage's name as the checklist shows it.
+fn describe(stage: &str, variant: &str) -> String {
+    match stage {
+        "poses" => "poses (structure from motion)".into(),
+        "pretrain" => format!("pretrain ({variant})"),
+        "stylize" => "stylize".into(),
+        _ => "video, report, mesh".into(),
+    }
+}
+
+/// Prints each stage's start and end with its place in the checklist and the time so far.
+struct StageCounter<'a> {
+    plan: Vec<&'a str>,
+    started: Instant,
+}
+
+impl StageCounter<'_> {
+    fn number(&self, stage: &str) -> String {
+        let i = self.plan.iter().position(|s| *s == stage).unwrap_or(0);
+        format!("[{}/{}]", i + 1, self.plan.len())
+    }
+
+    fn begin(&self, stage: &str, manifest: &Manifest, inputs: Fingerprint) -> StageStart {
+        let start = manifest.start_of(stage, inputs);
+        let how = match start {
+            StageStart::Kept => format!(
+                "kept (finished before, in {})",
+                minutes(manifest.seconds(stage))
+            ),
+            StageStart::Resumed => "resuming where it stopped".into(),
+            StageStart::Fresh => "starting".into(),
+        };
+        eprintln!("{} {stage}: {how}", self.number(stage));
+        start
+    }
+
+    fn end(&self, stage: &str, manifest: &Manifest, next_estimate: Option<f64>) {
+        let left = next_estimate
+            .map(|s| format!("; the stylization should take about {}", minutes(s)))
+            .unwrap_or_default();
+        eprintln!(
+            "{} {stage} done ({}; {} so far){left}",
+            self.number(stage),
+            minutes(manifest.seconds(stage)),
+            minutes(self.started.elapsed().as_secs_f64())
+        );
+    }
+}
+
+/// `12 s`, `4.2 min`.
+fn minutes(seconds: f64) -> String {
+    if seconds < 90.0 {
+        format!("{seconds:.0} s")
+    } else {
+        format!("{:.1} min", seconds / 60.0)
+    }
+}
+
+/// What `dir` holds: a scene folder of a known format, or plain photos (at least
+/// [`MIN_PHOTOS`]); anything else is an error saying what was expected.
+fn what_photos(dir: &Path) -> Result<Photos> {
+    if !dir.is_dir() {
+        bail!("--photos {}: not a folder", dir.display());
+    }
+    if let Ok(format) = ins_scene::data::detect_format(dir) {
+        return Ok(Photos::Scene(format));
+    }
+    let files = list_images(dir)?;
+    if files.len() < MIN_PHOTOS {
+        bail!(
+            "--photos {}: {} photos; a scene needs at least {MIN_PHOTOS} overlapping ones \
+             (30–100 is typical, each spot seen from several), or a scene folder (COLMAP \
+             workspace, transforms.json, Blender, LLFF, DTU)",
+            dir.display(),
+            files.len()
+        );
+    }
+    Ok(Photos::Plain(files))
+}
+
+/// Every file under a scene folder, in a fixed order (what its fingerprint reads), but those of
+/// the output folder `out` where it lies inside the scene's.
+fn scene_files(dir: &Path, out: &Path) -> Result<Vec<PathBuf>> {
+    let out = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).with_context(|| format!("reading {}", d.display()))? {
+            let p = e?.path();
+            if std::path::absolute(&p).is_ok_and(|p| p.starts_with(&out)) {
+                continue;
+            }
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// Refuses to start when the output's disk has less than [`MIN_FREE_BYTES`] free.
+fn check_free_space(out: &Path) -> Result<()> {
+    let mut probe = out.to_path_buf();
+    while !probe.exists() {
+        match probe.parent() {
+            Some(p) if !p.as_os_str().is_empty() => probe = p.to_path_buf(),
+            _ => {
+                probe = PathBuf::from(".");
+                break;
+            }
+        }
+    }
+    let c = std::ffi::CString::new(probe.as_os_str().as_encoded_bytes())?;
+    let mut s: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: `c` is a NUL-terminated path and `s` a writable statvfs.
+    if unsafe { libc::statvfs(c.as_ptr(), &mut s) } != 0 {
+        return Ok(()); // a filesystem that cannot say: the writes will tell
+    }
+    let free = s.f_bavail as u64 * s.f_frsize as u64;
+    if free < MIN_FREE_BYTES {
+        bail!(
+            "{}: only {:.0} MB free on its disk; a run needs about {:.0} MB (checkpoints, the \
+             posed photos, frames): free some space or choose another --out",
+            out.display(),
+            free as f64 / 1e6,
+            MIN_FREE_BYTES as f64 / 1e6
+        );
+    }
+    Ok(())
+}
+
+/// Removes a stage's output folder (one this command made inside its output folder).
+fn remove(dir: &Path) -> Result<()> {
+    if dir.exists() {
+        std::fs::remove_dir_all(dir).with_context(|| format!("removing {}", dir.display()))?;
+    }
+    Ok(())
+}
+
+/// The stylized frames of the report's evaluation as a video in `renders`: MP4 where ffmpeg
+/// is on PATH, else a GIF, named by the path (turntable, arc, spiral).
+fn write_video(stylized: &Path, renders: &Path) -> Result<PathBuf> {
+    let eval = stylized.join("consistency");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(eval.join("summary.json")).context("the evaluation's summary")?,
+    )?;
+    let path = summary["path"].as_str().unwrap_or("path").to_string();
+    let frames = summary["frames"].as_u64().unwrap_or(0) as usize;
+    let names: Vec<String> = (0..frames).map(|i| format!("frame_{i:04}.png")).collect();
+    let images = names
+        .iter()
+        .map(|n| RgbImage::load(&eval.join("stylized").join(n)))
+        .collect::<Result<Vec<_>>>()?;
+    std::fs::create_dir_all(renders).with_context(|| format!("creating {}", renders.display()))?;
+    let ext = if ffmpeg_available() { "mp4" } else { "gif" };
+    let out = renders.join(format!("{path}.{ext}"));
+    write_frames(&images, &names, &FrameOutput::for_path(&out)?, 12)?;
+    Ok(out)
+}
+
+/// The video a finished outputs stage wrote.
+fn find_video(renders: &Path) -> Option<PathBuf> {
+    let entries = std::fs::read_dir(renders).ok()?;
+    entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("mp4" | "gif")))
+}
