@@ -123,11 +123,25 @@ impl Stylize {
             return Ok(0);
         }
         let (w, h) = ins_scene::data::Scene::probe_resolution(photos_dir)?;
-        Ok(ins_models::run::scene::auto_downscale(
+        let d = ins_models::run::scene::auto_downscale(
             w,
             h,
             ins_models::run::scene::DEFAULT_LONG_SIDE / 2,
-        ))
+        );
+        // An LLFF folder shrinks only from the folders it has (fern: images_8/ alone).
+        if d > 1
+            && ins_scene::data::detect_format(photos_dir)? == SceneFormat::Llff
+            && !photos_dir.join(format!("images_{d}")).is_dir()
+            && !photos_dir.join("images").is_dir()
+        {
+            eprintln!(
+                "--quick: {} has neither images_{d}/ nor images/ to bring its {w}×{h} photos \
+                 near 200 px: they stay at that size",
+                photos_dir.display()
+            );
+            return Ok(0);
+        }
+        Ok(d)
     }
 
     /// `steps`, or the variant's `default` (a quarter of it with --quick).
