@@ -265,14 +265,7 @@ fn misposed_photos_are_found_and_left_out() {
     };
     let left_out = dropped(&run);
     assert_eq!(left_out.len(), 4, "{left_out:?}");
-    let style = gradient_painting(&dir.path().join("style.png"));
-    let stylized = dir.path().join("stylized");
-    ok(stylize_nerf(
-        &run,
-        &[&style],
-        &stylized,
-        &["--steps", "2", "--patch", "12", "--style-size", "32"],
-    ));
+    let stylized = stylize_nerf_briefly(&run, dir.path());
     assert_eq!(dropped(&stylized), left_out);
 }
 

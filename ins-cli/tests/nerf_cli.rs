@@ -405,14 +405,7 @@ fn a_capture_mixing_portrait_and_landscape_photos_trains_evaluates_stylizes_and_
         image::GenericImageView::dimensions(&image::open(&one).unwrap()),
         (18, 24)
     );
-    let style = gradient_painting(&dir.path().join("style.png"));
-    let st = dir.path().join("stylized");
-    ok(stylize_nerf(
-        &run,
-        &[&style],
-        &st,
-        &["--steps", "2", "--patch", "12", "--style-size", "32"],
-    ));
+    let st = stylize_nerf_briefly(&run, dir.path());
     let frames = dir.path().join("frames");
     ok(cli(&[
         "render",

@@ -121,6 +121,20 @@ pub fn gradient_painting(path: &Path) -> std::path::PathBuf {
     path.to_path_buf()
 }
 
+/// Two stylizing steps of `run` with the generated painting (written into `dir`), into
+/// `dir/stylized`, which it returns.
+pub fn stylize_nerf_briefly(run: &Path, dir: &Path) -> std::path::PathBuf {
+    let style = gradient_painting(&dir.join("style.png"));
+    let out = dir.join("stylized");
+    ok(stylize_nerf(
+        run,
+        &[&style],
+        &out,
+        &["--steps", "2", "--patch", "12", "--style-size", "32"],
+    ));
+    out
+}
+
 /// A short stylization of the NeRF run `run` on flex into `out` with `styles` in order
 /// (full-resolution patches, no evaluation, quiet); `extra` gives the steps, patch size and
 /// anything else the test needs.
