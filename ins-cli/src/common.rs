@@ -110,6 +110,10 @@ pub struct RunArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// The held-out views rendered once more at the end (`ins-cli stylize --quick` leaves
+    /// them out: its report shows the views).
+    #[arg(skip = true)]
+    pub final_pictures: bool,
 }
 
 impl RunArgs {
@@ -120,6 +124,7 @@ impl RunArgs {
         opts.checkpoint_every = checkpoint_every;
         opts.resume = self.resume;
         opts.quiet = self.quiet;
+        opts.final_pictures = self.final_pictures;
         opts
     }
 }

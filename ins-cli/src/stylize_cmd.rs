@@ -170,6 +170,7 @@ impl Stylize {
             config: None,
             resume,
             quiet: self.quiet,
+            final_pictures: !self.quick,
         };
         let cmd = TrainCommand {
             out,

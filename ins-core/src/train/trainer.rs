@@ -44,6 +44,9 @@ pub struct TrainOptions {
     /// A wait reported until the first step ends (a first wgpu run compiles and tunes kernels
     /// for minutes before it).
     pub first_step: Option<FirstStep>,
+    /// Render the held-out views once more at the end (`val/final.png`). A stylized field's
+    /// take minutes on a CPU (fern's three at 504×378: 202 s); a preview leaves them out.
+    pub final_pictures: bool,
 }
 
 impl TrainOptions {
@@ -58,6 +61,7 @@ impl TrainOptions {
             quiet: false,
             stop_after: None,
             first_step: None,
+            final_pictures: true,
         }
     }
 }

@@ -37,8 +37,9 @@ pub fn train<V: Variant>(
         folder,
         lock: _lock,
     } = prepare::<V>(cfg, vgg, device, &opts)?;
+    let final_pictures = opts.final_pictures;
     let outcome = Trainer::new(phases, opts).run(&mut task, model)?;
-    if outcome.finished {
+    if outcome.finished && final_pictures {
         V::final_report(&outcome.model, &task, &cfg, &folder, device)?;
     }
     Ok(outcome)
