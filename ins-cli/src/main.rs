@@ -15,6 +15,7 @@ mod siren_cmd;
 mod stages;
 mod stylize2d_cmd;
 mod stylize_cmd;
+mod stylize_inputs;
 mod vgg_cmd;
 mod view_cmd;
 mod view_size;

@@ -7,6 +7,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
@@ -162,6 +163,64 @@ impl Manifest {
         }
         ins_io::write_atomic(&self.path, serde_json::to_string_pretty(self)?.as_bytes())?;
         Ok(())
+    }
+}
+
+/// A stage's name as the checklist shows it.
+pub fn describe(stage: &str, variant: &str) -> String {
+    match stage {
+        "poses" => "poses (structure from motion)".into(),
+        "pretrain" => format!("pretrain ({variant})"),
+        "stylize" => "stylize".into(),
+        _ => "video, report, mesh".into(),
+    }
+}
+
+/// Prints each stage's start and end with its place in the checklist and the time so far.
+pub struct StageCounter<'a> {
+    pub plan: Vec<&'a str>,
+    pub started: Instant,
+}
+
+impl StageCounter<'_> {
+    fn number(&self, stage: &str) -> String {
+        let i = self.plan.iter().position(|s| *s == stage).unwrap_or(0);
+        format!("[{}/{}]", i + 1, self.plan.len())
+    }
+
+    pub fn begin(&self, stage: &str, manifest: &Manifest, inputs: Fingerprint) -> StageStart {
+        let start = manifest.start_of(stage, inputs);
+        let how = match start {
+            StageStart::Kept => format!(
+                "kept (finished before, in {})",
+                minutes(manifest.seconds(stage))
+            ),
+            StageStart::Resumed => "resuming where it stopped".into(),
+            StageStart::Fresh => "starting".into(),
+        };
+        eprintln!("{} {stage}: {how}", self.number(stage));
+        start
+    }
+
+    pub fn end(&self, stage: &str, manifest: &Manifest, next_estimate: Option<f64>) {
+        let left = next_estimate
+            .map(|s| format!("; the stylization should take about {}", minutes(s)))
+            .unwrap_or_default();
+        eprintln!(
+            "{} {stage} done ({}; {} so far){left}",
+            self.number(stage),
+            minutes(manifest.seconds(stage)),
+            minutes(self.started.elapsed().as_secs_f64())
+        );
+    }
+}
+
+/// `12 s`, `4.2 min`.
+pub fn minutes(seconds: f64) -> String {
+    if seconds < 90.0 {
+        format!("{seconds:.0} s")
+    } else {
+        format!("{:.1} min", seconds / 60.0)
     }
 }
 

@@ -30,18 +30,10 @@ use ins_models::run::scene::load_scene;
 use ins_models::run::{MeshOptions, RunKind};
 use ins_models::video::{FrameOutput, ffmpeg_available, write_frames};
 use ins_scene::data::SceneFormat;
-use ins_scene::data::images::list_images;
 
 use crate::common::{DeviceArgs, RunArgs, TrainCommand, VggArgs};
-use crate::stages::{Fingerprint, Manifest, StageStart};
-
-/// Fewest photos worth posing and training on: below this structure from motion rarely
-/// registers enough of them, and a held-out view or two leaves too few to learn from.
-pub const MIN_PHOTOS: usize = 8;
-
-/// Free disk space a run needs: two runs' checkpoints (tens of MB each), the posed photos'
-/// copies and the frames of the video and report, with room to spare.
-const MIN_FREE_BYTES: u64 = 1 << 30;
+use crate::stages::{Fingerprint, Manifest, StageCounter, StageStart, describe, minutes};
+use crate::stylize_inputs::{MIN_PHOTOS, Photos, check_free_space, scene_files, what_photos};
 
 /// How much slower a stylizing step is than a pretraining step of the same scene (a VGG-16
 /// pass forward and back per patch): lego at 200² on 2 cores, 0.46 s against 1.1 s a step
@@ -107,14 +99,6 @@ enum AnyConfig<'a> {
 
 /// The stages, in order.
 const STAGES: [&str; 4] = ["poses", "pretrain", "stylize", "outputs"];
-
-/// What the photos folder holds.
-enum Photos {
-    /// Plain photos, to pose.
-    Plain(Vec<PathBuf>),
-    /// A scene folder of a known format.
-    Scene(SceneFormat),
-}
 
 impl Stylize {
     /// The settings a preview scales down: a quarter of the steps (0: the variant's default,
@@ -477,140 +461,6 @@ pub fn run(a: Stylize) -> Result<()> {
         "  look around it: ins-cli view --run {}",
         stylized.display()
     );
-    Ok(())
-}
-
-/// A stage's name as the checklist shows it.
-fn describe(stage: &str, variant: &str) -> String {
-    match stage {
-        "poses" => "poses (structure from motion)".into(),
-        "pretrain" => format!("pretrain ({variant})"),
-        "stylize" => "stylize".into(),
-        _ => "video, report, mesh".into(),
-    }
-}
-
-/// Prints each stage's start and end with its place in the checklist and the time so far.
-struct StageCounter<'a> {
-    plan: Vec<&'a str>,
-    started: Instant,
-}
-
-impl StageCounter<'_> {
-    fn number(&self, stage: &str) -> String {
-        let i = self.plan.iter().position(|s| *s == stage).unwrap_or(0);
-        format!("[{}/{}]", i + 1, self.plan.len())
-    }
-
-    fn begin(&self, stage: &str, manifest: &Manifest, inputs: Fingerprint) -> StageStart {
-        let start = manifest.start_of(stage, inputs);
-        let how = match start {
-            StageStart::Kept => format!(
-                "kept (finished before, in {})",
-                minutes(manifest.seconds(stage))
-            ),
-            StageStart::Resumed => "resuming where it stopped".into(),
-            StageStart::Fresh => "starting".into(),
-        };
-        eprintln!("{} {stage}: {how}", self.number(stage));
-        start
-    }
-
-    fn end(&self, stage: &str, manifest: &Manifest, next_estimate: Option<f64>) {
-        let left = next_estimate
-            .map(|s| format!("; the stylization should take about {}", minutes(s)))
-            .unwrap_or_default();
-        eprintln!(
-            "{} {stage} done ({}; {} so far){left}",
-            self.number(stage),
-            minutes(manifest.seconds(stage)),
-            minutes(self.started.elapsed().as_secs_f64())
-        );
-    }
-}
-
-/// `12 s`, `4.2 min`.
-fn minutes(seconds: f64) -> String {
-    if seconds < 90.0 {
-        format!("{seconds:.0} s")
-    } else {
-        format!("{:.1} min", seconds / 60.0)
-    }
-}
-
-/// What `dir` holds: a scene folder of a known format, or plain photos (at least
-/// [`MIN_PHOTOS`]); anything else is an error saying what was expected.
-fn what_photos(dir: &Path) -> Result<Photos> {
-    if !dir.is_dir() {
-        bail!("--photos {}: not a folder", dir.display());
-    }
-    if let Ok(format) = ins_scene::data::detect_format(dir) {
-        return Ok(Photos::Scene(format));
-    }
-    let files = list_images(dir)?;
-    if files.len() < MIN_PHOTOS {
-        bail!(
-            "--photos {}: {} photos; a scene needs at least {MIN_PHOTOS} overlapping ones \
-             (30–100 is typical, each spot seen from several), or a scene folder (COLMAP \
-             workspace, transforms.json, Blender, LLFF, DTU)",
-            dir.display(),
-            files.len()
-        );
-    }
-    Ok(Photos::Plain(files))
-}
-
-/// Every file under a scene folder, in a fixed order (what its fingerprint reads), but those of
-/// the output folder `out` where it lies inside the scene's.
-fn scene_files(dir: &Path, out: &Path) -> Result<Vec<PathBuf>> {
-    let out = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
-    let mut files = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).with_context(|| format!("reading {}", d.display()))? {
-            let p = e?.path();
-            if std::path::absolute(&p).is_ok_and(|p| p.starts_with(&out)) {
-                continue;
-            }
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                files.push(p);
-            }
-        }
-    }
-    files.sort();
-    Ok(files)
-}
-
-/// Refuses to start when the output's disk has less than [`MIN_FREE_BYTES`] free.
-fn check_free_space(out: &Path) -> Result<()> {
-    let mut probe = out.to_path_buf();
-    while !probe.exists() {
-        match probe.parent() {
-            Some(p) if !p.as_os_str().is_empty() => probe = p.to_path_buf(),
-            _ => {
-                probe = PathBuf::from(".");
-                break;
-            }
-        }
-    }
-    let c = std::ffi::CString::new(probe.as_os_str().as_encoded_bytes())?;
-    let mut s: libc::statvfs = unsafe { std::mem::zeroed() };
-    // SAFETY: `c` is a NUL-terminated path and `s` a writable statvfs.
-    if unsafe { libc::statvfs(c.as_ptr(), &mut s) } != 0 {
-        return Ok(()); // a filesystem that cannot say: the writes will tell
-    }
-    let free = s.f_bavail as u64 * s.f_frsize as u64;
-    if free < MIN_FREE_BYTES {
-        bail!(
-            "{}: only {:.0} MB free on its disk; a run needs about {:.0} MB (checkpoints, the \
-             posed photos, frames): free some space or choose another --out",
-            out.display(),
-            free as f64 / 1e6,
-            MIN_FREE_BYTES as f64 / 1e6
-        );
-    }
     Ok(())
 }
 
