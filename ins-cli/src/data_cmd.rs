@@ -57,6 +57,8 @@ pub enum DataCommand {
         format: SceneFormat,
         /// Captures (colmap, transforms): `object` (around a tabletop in a room), `studio` (around
         /// the tabletop's objects before a plain backdrop) or `forward` (a forward-facing grid).
+        /// DTU: `object` (the tabletop) or `notched` (a block with a hollow corner that masks
+        /// alone cannot carve, for checking that a surface keeps its concavities).
         #[arg(long, default_value = "object")]
         layout: String,
         /// COLMAP: write the model as text instead of binary.
@@ -142,11 +144,27 @@ pub fn run(cmd: DataCommand) -> Result<()> {
                 bail!("--mixed-orientations is for --format transforms");
             }
             let opts = SynthOptions { size, views };
+            if layout == "notched" {
+                if format != SceneFormat::Dtu {
+                    bail!("--layout notched is for --format dtu");
+                }
+                let s = synthetic::write_dtu_of(
+                    synthetic::AnalyticScene::notched_block(),
+                    &out,
+                    &opts,
+                )?;
+                println!(
+                    "wrote a notched block as a dtu scene with {} views to {}",
+                    s.views.len(),
+                    out.display()
+                );
+                return Ok(());
+            }
             let layout = match layout.as_str() {
                 "object" => synthetic::CaptureLayout::ObjectCentred,
                 "studio" => synthetic::CaptureLayout::Studio,
                 "forward" => synthetic::CaptureLayout::ForwardFacing,
-                other => bail!("--layout {other}: expected object, studio or forward"),
+                other => bail!("--layout {other}: expected object, studio, forward or notched"),
             };
             let encoding = if text {
                 Encoding::Text

@@ -26,6 +26,7 @@ use burn::optim::GradientsParams;
 use burn::prelude::*;
 use ins_core::backend::BackendChoice;
 use ins_core::train::{Stepper, Task, TrainOptions};
+use ins_models::idr::model::SdfRenderer;
 use ins_models::idr::{Idr, IdrRunConfig};
 use ins_models::nerf::{Nerf, NerfRunConfig};
 use ins_models::run::{RunConfig, StyleArgs, Variant, prepare, train};
@@ -154,7 +155,8 @@ fn small_idr(dir: &Path) -> IdrRunConfig {
     let mut cfg = IdrRunConfig {
         holdout: 4,
         rays: 256,
-        eval_every: 0,
+        eval_every: Some(0),
+        renderer: SdfRenderer::Surface,
         ..Default::default()
     };
     cfg.source.scene = Some(scene);
@@ -208,6 +210,20 @@ fn an_idr_pretraining_step_has_the_same_loss_and_gradients_on_wgpu() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = small_idr(dir.path());
     flex_and_wgpu_agree::<Idr>(cfg, 0, dir.path().to_path_buf(), "IDR's pretraining step");
+}
+
+#[test]
+fn an_idr_volume_pretraining_step_has_the_same_loss_and_gradients_on_wgpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = small_idr(dir.path());
+    cfg.renderer = SdfRenderer::Volume;
+    cfg.rays = 64;
+    flex_and_wgpu_agree::<Idr>(
+        cfg,
+        0,
+        dir.path().to_path_buf(),
+        "IDR's volume pretraining step",
+    );
 }
 
 #[test]

@@ -25,7 +25,7 @@ pub fn run(device: &Device, steps: usize) -> Result<Timing> {
     let (scene, _) = load_scene(dir.path(), 1, None, 0, false)?;
     let mut cfg = IdrRunConfig::default();
     Idr::resolve(&mut cfg, RunKind::Pretrain, &scene);
-    let rays = cfg.rays as f64;
+    let rays = cfg.rays_for() as f64;
     let mut task = pretrain_task(&cfg, scene, Vec::new(), dir.path().join("val"), device)?;
     let model = Idr::new_model(&cfg, &task.scene, device);
     let w = LossWeights::default_for(

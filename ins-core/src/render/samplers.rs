@@ -43,6 +43,17 @@ pub fn deltas(t: Tensor<2>, far: Tensor<1>) -> Tensor<2> {
 /// (stratified in CDF space with jitter from `seed`, or at bin centres when `None`), merged with
 /// the coarse samples and sorted: `[R, S + n]`. No gradient flows through the result.
 pub fn hierarchical(t: Tensor<2>, weights: Tensor<2>, n: usize, seed: Option<u64>) -> Tensor<2> {
+    let fine = draw_from_weights(t.clone(), weights, n, seed);
+    Tensor::cat(vec![t.detach(), fine], 1).sort(1)
+}
+
+/// The `n` new distances of [`hierarchical`] alone, in increasing order: `[R, n]`.
+pub fn draw_from_weights(
+    t: Tensor<2>,
+    weights: Tensor<2>,
+    n: usize,
+    seed: Option<u64>,
+) -> Tensor<2> {
     let [r, s] = t.dims();
     let device = t.device();
     let t = t.detach();
@@ -77,8 +88,7 @@ pub fn hierarchical(t: Tensor<2>, weights: Tensor<2>, n: usize, seed: Option<u64
     let b1 = mids.gather(1, above);
     let span = (c1 - c0.clone()).clamp_min(1e-8);
     let frac = ((u - c0) / span).clamp(0.0, 1.0);
-    let fine = b0.clone() + frac * (b1 - b0);
-    Tensor::cat(vec![t, fine], 1).sort(1)
+    b0.clone() + frac * (b1 - b0)
 }
 
 #[cfg(test)]

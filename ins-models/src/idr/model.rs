@@ -9,6 +9,7 @@ use ins_core::modules::sdf::{SdfGridConfig, SdfMlpConfig, SdfNet};
 use ins_core::modules::sim::Sim;
 use ins_core::modules::style_position::{StylePosition, StylePositionConfig, positional_sim};
 use ins_core::modules::surface_color::{SurfaceColor, SurfaceColorConfig};
+use ins_core::render::sdf_volume::Sharpness;
 use ins_core::train::{GroupSpec, Optimizable};
 use serde::{Deserialize, Serialize};
 
@@ -43,6 +44,41 @@ impl std::fmt::Display for SdfKind {
     }
 }
 
+/// How pretraining renders the SDF.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum SdfRenderer {
+    /// IDR: sphere-trace the first surface point, colour there, masks through the closest
+    /// approach (runs from before the volume renderer).
+    #[default]
+    Surface,
+    /// NeuS: the SDF as a volume with a learnable sharpness, every sample along the ray
+    /// coloured and weighted.
+    Volume,
+}
+
+impl std::str::FromStr for SdfRenderer {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "surface" | "idr" => Ok(Self::Surface),
+            "volume" | "neus" => Ok(Self::Volume),
+            _ => Err(format!(
+                "unknown --renderer {s:?} (expected volume or surface)"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for SdfRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Surface => "surface",
+            Self::Volume => "volume",
+        })
+    }
+}
+
 /// SIM and feature AM.
 #[derive(Module, Debug)]
 pub struct SurfaceStylizer {
@@ -63,6 +99,8 @@ pub struct IdrModel {
     pub color: SurfaceColor,
     /// SIM + AM (stylization runs only).
     pub stylizer: Option<SurfaceStylizer>,
+    /// The volume renderer's sharpness (runs pretrained as a volume only).
+    pub sharpness: Option<Sharpness>,
 }
 
 impl Optimizable for IdrModel {
@@ -73,6 +111,9 @@ impl Optimizable for IdrModel {
             GroupSpec::new("sdf", &["sdf"]),
             GroupSpec::new("color", &["color"]),
         ];
+        if self.sharpness.is_some() {
+            groups.push(GroupSpec::new("sharpness", &["sharpness"]));
+        }
         if let Some(s) = &self.stylizer {
             groups.push(GroupSpec::new("sim", &["stylizer.sim"]));
             if s.position.grid.is_some() {
@@ -84,6 +125,10 @@ impl Optimizable for IdrModel {
         groups
     }
 }
+
+/// The volume renderer's starting sharpness, `s = exp(10 · 0.3) ≈ 20` (NeuS, instant-nsr-pl):
+/// a band about a tenth of the unit sphere wide, which the surface narrows as it settles.
+const INITIAL_VARIANCE: f32 = 0.3;
 
 /// Sizes of an IDR model.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -99,6 +144,9 @@ pub struct IdrArch {
     /// Finest resolution of the colour network's appearance grid (0: none).
     #[serde(default)]
     pub color_grid: u32,
+    /// How pretraining renders the SDF (a volume adds the learnable sharpness).
+    #[serde(default)]
+    pub renderer: SdfRenderer,
 }
 
 impl IdrArch {
@@ -171,6 +219,8 @@ impl IdrModel {
             sdf,
             color,
             stylizer: None,
+            sharpness: (arch.renderer == SdfRenderer::Volume)
+                .then(|| Sharpness::new(INITIAL_VARIANCE, device)),
         }
     }
 

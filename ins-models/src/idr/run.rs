@@ -14,7 +14,7 @@ use ins_scene::patches::PatchSpec;
 
 use super::config::IdrRunConfig;
 use super::eval::{evaluate_views, save_pictures};
-use super::model::IdrModel;
+use super::model::{IdrModel, SdfRenderer};
 use super::task::{IdrObjective, IdrTask, SurfaceStylization};
 use crate::run::scene_frame::{check_scene_frame, write_scene_frame};
 use crate::run::{Run, RunKind, Start, Variant};
@@ -33,6 +33,11 @@ pub const PATCH_SHARE: f32 = 0.5;
 /// others' rate (1e-3) the style loss on scan37 stayed flat for 160 of 200 steps, until γ had
 /// moved.
 pub const BLEND_LR_MULT: f64 = 10.0;
+
+/// Learning-rate multiplier of the volume renderer's sharpness while pretraining. NeuS moves
+/// it at the others' rate over 300k steps; in a few thousand, at 5e-3, s had only climbed from
+/// 20 to 66 by step 1000 on scan37, leaving a blurred band outside the silhouette (IoU 0.89).
+pub const SHARPNESS_LR_MULT: f64 = 4.0;
 
 /// Loads a scene for surface reconstruction, in the unit-sphere frame IDR works in: DTU ships
 /// it; an object captured from around it (COLMAP, transforms.json, NeRF-synthetic) is placed
@@ -132,6 +137,10 @@ impl Variant for Idr {
         cfg.schedule.lr = cfg.lr_for(kind);
         cfg.style.resolve(64, 256, StyleLoss::Nnfm);
         cfg.stylizer.sim_width = cfg.sim_width_for();
+        cfg.rays = cfg.rays_for();
+        cfg.mask_weight = cfg.mask_weight_for();
+        cfg.eikonal_points = Some(cfg.eikonal_points_for());
+        cfg.eval_every = Some(cfg.eval_every_for());
     }
 
     fn inherit(cfg: &mut IdrRunConfig, base: &IdrRunConfig, from: &Path) -> Result<()> {
@@ -147,6 +156,8 @@ impl Variant for Idr {
         cfg.holdout = base.holdout;
         cfg.no_mask = base.no_mask;
         cfg.init_radius = base.init_radius;
+        // The model's parts follow how it was pretrained (a volume run has a sharpness).
+        cfg.renderer = base.renderer;
         Ok(())
     }
 
@@ -196,11 +207,11 @@ impl Variant for Idr {
                 let views = scene.split(Split::Val).to_vec();
                 Ok(IdrTask::new(
                     scene,
-                    cfg.rays,
+                    cfg.rays_for(),
                     cfg.schedule.steps,
                     !cfg.no_mask,
                     Some(style),
-                    cfg.eval_every,
+                    cfg.eval_every_for(),
                     views,
                     folder.val_dir(),
                     device,
@@ -220,6 +231,10 @@ impl Variant for Idr {
                     .weight("content", weights.content);
                 if cfg.stylizer.sim_grid > 0 {
                     phase = phase.lr_mult("texture", TEXTURE_LR_MULT);
+                }
+                if cfg.renderer == SdfRenderer::Volume {
+                    // The sharpness belongs to the surface: it stays as pretrained.
+                    phase = phase.freeze("sharpness");
                 }
                 if cfg.sdf_lr_ratio > 0.0 {
                     phase.lr_mult("sdf", cfg.sdf_lr_ratio)
@@ -295,17 +310,19 @@ pub fn pretrain_task(
 ) -> Result<IdrTask> {
     let mut task = IdrTask::new(
         scene,
-        cfg.rays,
+        cfg.rays_for(),
         cfg.schedule.steps,
         !cfg.no_mask,
         None,
-        cfg.eval_every,
+        cfg.eval_every_for(),
         views,
         val_dir,
         device,
     )
     .with_mask_rays(cfg.mask_rays)?;
-    task.eikonal_points = cfg.eikonal_points;
+    task.eikonal_points = cfg.eikonal_points_for();
+    task.renderer = cfg.renderer;
+    task.sampling = cfg.volume_sampling();
     Ok(task)
 }
 
@@ -322,10 +339,15 @@ pub fn pretrain_phase(cfg: &IdrRunConfig) -> Phase<IdrObjective> {
         .weight("rgb", 1.0)
         .weight("mse_mask", 0.0)
         .weight("eikonal", cfg.eikonal_weight);
+    let phase = if cfg.renderer == SdfRenderer::Volume {
+        phase.lr_mult("sharpness", SHARPNESS_LR_MULT)
+    } else {
+        phase
+    };
     if cfg.no_mask {
         phase
     } else {
-        phase.weight("mask", cfg.mask_weight)
+        phase.weight("mask", cfg.mask_weight_for())
     }
 }
 

@@ -18,8 +18,9 @@ use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use super::eval::{evaluate_views, save_pictures};
-use super::model::IdrModel;
+use super::model::{IdrModel, SdfRenderer};
 use super::render::render_surface;
+use super::volume::{VolumeSampling, render_volume};
 
 /// What a phase of an IDR run computes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -68,6 +69,10 @@ pub struct IdrTask {
     pub trace: TraceOptions,
     /// Pretraining rays drawn inside the masks: the share and the index of mask pixels.
     pub mask_rays: Option<(f32, MaskedPixels)>,
+    /// How pretraining renders the SDF.
+    pub renderer: SdfRenderer,
+    /// The volume renderer's samples.
+    pub sampling: VolumeSampling,
     device: Device,
 }
 
@@ -97,6 +102,8 @@ impl IdrTask {
             eval_dir,
             trace: TraceOptions::default(),
             mask_rays: None,
+            renderer: SdfRenderer::Surface,
+            sampling: VolumeSampling::default(),
             device: device.clone(),
         }
     }
@@ -117,11 +124,103 @@ impl IdrTask {
         50.0 * 2f32.powi((step / fifth).min(5) as i32)
     }
 
-    fn pretrain_losses(&self, model: &IdrModel, step: usize, seed: u64) -> Result<LossTerms> {
-        let batch = match &self.mask_rays {
+    /// A pretraining batch of rays: `mask_rays`'s share inside the masks, the rest uniform.
+    fn pretrain_batch(&self, seed: u64) -> Result<ins_scene::rays::RayBatch> {
+        Ok(match &self.mask_rays {
             Some((share, index)) => index.sample(&self.scene, self.rays, *share, seed)?,
             None => RaySampler::new(self.rays, seed).sample(&self.scene, Split::Train)?,
+        })
+    }
+
+    /// Pretraining through the volume renderer: L1 colour over the mask's rays (black
+    /// elsewhere), the opacity's cross-entropy against the mask, eikonal on every sample.
+    fn pretrain_volume_losses(&self, model: &IdrModel, seed: u64) -> Result<LossTerms> {
+        let batch = self.pretrain_batch(seed)?;
+        let r = batch.len();
+        let out = render_volume(
+            model,
+            &batch.rays,
+            None,
+            [0.0; 3],
+            &self.sampling,
+            Some(seed),
+            &self.device,
+        );
+        let mask: Vec<f32> = if self.masked {
+            batch.mask.clone()
+        } else {
+            vec![1.0; r]
         };
+        let inside: Vec<f32> = mask.iter().map(|&m| (m > 0.5) as u8 as f32).collect();
+        let count = inside.iter().sum::<f32>().max(1.0);
+        let inside_t = Tensor::<1>::from_floats(inside.as_slice(), &self.device).reshape([r, 1]);
+        let target =
+            Tensor::<1>::from_floats(batch.rgb.as_flattened(), &self.device).reshape([r, 3]);
+        let diff = (out.rgb - target) * inside_t.clone();
+        let rgb_loss = diff.clone().abs().sum().div_scalar(count);
+        let mse_in = diff.square().sum().div_scalar(count * 3.0);
+        let opacity = out.opacity.clone();
+        let mut terms = LossTerms::default()
+            .term("rgb", rgb_loss)
+            .term("mse_mask", mse_in)
+            .metric_of("psnr_mask", "mse_mask", psnr);
+        if let Some(sharp) = &model.sharpness {
+            terms = terms.metric("sharpness", sharp.value() as f64);
+        }
+        if self.masked {
+            let gt = Tensor::<1>::from_floats(inside.as_slice(), &self.device);
+            let o = opacity.clamp(1e-3, 1.0 - 1e-3);
+            let bce = (gt.clone() * o.clone().log()
+                + gt.neg().add_scalar(1.0) * o.neg().add_scalar(1.0).log())
+            .neg()
+            .mean();
+            terms = terms.term("mask", bce);
+        }
+        // Eikonal: every sample inside the unit sphere, and random points of its box.
+        let per_sample = out
+            .gradients
+            .square()
+            .sum_dim(1)
+            .sqrt()
+            .sub_scalar(1.0)
+            .square()
+            .reshape([out.live.dims()[0]])
+            * out.live;
+        let mut eik = per_sample.sum();
+        let mut counted = out.live_count;
+        if let Some(g) = self.random_gradients(model, seed) {
+            let rows = g.dims()[0];
+            eik = eik
+                + g.square()
+                    .sum_dim(1)
+                    .sqrt()
+                    .sub_scalar(1.0)
+                    .square()
+                    .reshape([rows])
+                    .sum();
+            counted += rows;
+        }
+        Ok(terms.term("eikonal", eik.div_scalar(counted.max(1) as f32)))
+    }
+
+    /// The SDF's gradient at `eikonal_points` random points of the unit sphere's box.
+    fn random_gradients(&self, model: &IdrModel, seed: u64) -> Option<Tensor<2>> {
+        let mut rng = SmallRng::seed_from_u64(seed ^ 0xe1c0);
+        let k = self.eikonal_points;
+        let pts: Vec<f32> = (0..k * 3)
+            .map(|_| rng.random::<f32>() * 2.0 - 1.0)
+            .collect();
+        (k > 0).then(|| {
+            let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]);
+            model.sdf.forward_with_gradient(x).2
+        })
+    }
+
+    fn pretrain_losses(&self, model: &IdrModel, step: usize, seed: u64) -> Result<LossTerms> {
+        if self.renderer == SdfRenderer::Volume {
+            return self.pretrain_volume_losses(model, seed);
+        }
+        let batch = self.pretrain_batch(seed)?;
         let r = batch.len();
         let out = render_surface(
             model,
@@ -199,15 +298,8 @@ impl IdrTask {
             }
         }
         // Eikonal: |∇f| = 1 at random points of the unit sphere's box and at the surface points.
-        let mut rng = SmallRng::seed_from_u64(seed ^ 0xe1c0);
         let k = self.eikonal_points;
-        let pts: Vec<f32> = (0..k * 3)
-            .map(|_| rng.random::<f32>() * 2.0 - 1.0)
-            .collect();
-        let random = (k > 0).then(|| {
-            let x = Tensor::<1>::from_floats(pts.as_slice(), &self.device).reshape([k, 3]);
-            model.sdf.forward_with_gradient(x).2
-        });
+        let random = self.random_gradients(model, seed);
         // Rows past the hits in the surface gradients are GPU padding, left out of the sum.
         let counted = k + out.hits.len();
         let gradients: Vec<Tensor<2>> = random.into_iter().chain(out.surface_gradients).collect();

@@ -184,6 +184,76 @@ impl AnalyticScene {
         }
     }
 
+    /// A block with a notch: a base slab and two walls standing on it in an L, so the corner
+    /// between the walls is hollow and, from every camera above it, seen against the object
+    /// itself (its floor is the slab), never against the background. Masks alone cannot carve
+    /// it (the visual hull fills it); only the photos' colours can. The notch is
+    /// [`Self::NOTCH`]; local z is up, on a ground plane at `z = −0.55`.
+    pub fn notched_block() -> Self {
+        let checker = |a: Vec3, b: Vec3, size: f32| Texture::Checker { a, b, size };
+        let block = |min: Vec3, max: Vec3, texture| Object {
+            shape: Shape::Box { min, max },
+            texture,
+            foreground: true,
+        };
+        let objects = vec![
+            // The slab: the notch's floor.
+            block(
+                Vec3::new(-0.5, -0.5, -0.55),
+                Vec3::new(0.5, 0.5, -0.35),
+                checker(Vec3::new(0.85, 0.75, 0.2), Vec3::new(0.2, 0.25, 0.7), 0.125),
+            ),
+            // The walls along x (at the back, low y) and along y (at low x).
+            block(
+                Vec3::new(-0.5, -0.5, -0.35),
+                Vec3::new(0.5, -0.1, 0.15),
+                checker(Vec3::new(0.85, 0.2, 0.15), Vec3::new(0.95, 0.95, 0.9), 0.1),
+            ),
+            block(
+                Vec3::new(-0.5, -0.1, -0.35),
+                Vec3::new(-0.1, 0.5, 0.15),
+                checker(Vec3::new(0.1, 0.6, 0.2), Vec3::new(0.95, 0.9, 0.6), 0.1),
+            ),
+            Object {
+                shape: Shape::Plane {
+                    point: Vec3::new(0.0, 0.0, -0.55),
+                    normal: Vec3::new(0.0, 0.0, 1.0),
+                },
+                texture: checker(Vec3::new(0.35, 0.3, 0.25), Vec3::new(0.6, 0.55, 0.5), 0.25),
+                foreground: false,
+            },
+        ];
+        AnalyticScene {
+            objects,
+            to_world: Similarity::identity(),
+            backdrop: Vec3::ZERO,
+        }
+    }
+
+    /// The hollow corner of [`Self::notched_block`] (local frame): empty space bounded by
+    /// the slab below and the walls on two sides.
+    pub const NOTCH: [[f32; 3]; 2] = [[-0.1, -0.1, -0.35], [0.5, 0.5, 0.15]];
+
+    /// Signed distance (local frame) to the union of the foreground boxes: exact outside,
+    /// a bound inside. For measuring reconstructed surfaces against the truth.
+    pub fn foreground_distance(&self, p: Vec3) -> f32 {
+        self.objects
+            .iter()
+            .filter(|o| o.foreground)
+            .filter_map(|o| match o.shape {
+                Shape::Box { min, max } => {
+                    let c = (min + max) * 0.5;
+                    let h = (max - min) * 0.5;
+                    let q = (p - c).abs() - h;
+                    let outside = q.max(Vec3::ZERO).length();
+                    Some(outside + q.x.max(q.y).max(q.z).min(0.0))
+                }
+                Shape::Sphere { center, radius } => Some((p - center).length() - radius),
+                Shape::Plane { .. } => None,
+            })
+            .fold(f32::INFINITY, f32::min)
+    }
+
     /// The tabletop's objects before a plain light backdrop, as in a photo studio or on a white
     /// table: nothing past the objects for structure from motion to find, and a background no
     /// surface in front of the cameras explains.
@@ -416,5 +486,28 @@ fn intersect(shape: &Shape, o: Vec3, d: Vec3) -> Option<(f32, Vec3)> {
             let t = (point - o).dot(normal) / denom;
             (t > EPS).then(|| (t, normal.normalize()))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_notched_blocks_corner_is_hollow_and_seen_against_the_block() {
+        let scene = AnalyticScene::notched_block();
+        let [lo, hi] = AnalyticScene::NOTCH;
+        let centre = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
+        // The notch's centre is empty: 0.25 above its floor, 0.3 from either wall.
+        assert!((scene.foreground_distance(centre) - 0.25).abs() < 1e-5);
+        // Inside the back wall and the slab, the distance is negative.
+        assert!(scene.foreground_distance(Vec3::new(0.2, -0.3, -0.1)) < 0.0);
+        assert!(scene.foreground_distance(Vec3::new(0.2, 0.2, -0.45)) < 0.0);
+        // A ray straight down the notch meets its floor (the slab, foreground), not the ground.
+        let hit = scene
+            .trace(Vec3::new(0.2, 0.2, 2.0), Vec3::new(0.0, 0.0, -1.0))
+            .unwrap();
+        assert!(scene.objects[hit.object].foreground);
+        assert!((hit.point.z + 0.35).abs() < 1e-4, "{:?}", hit.point);
     }
 }

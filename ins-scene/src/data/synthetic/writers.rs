@@ -253,7 +253,15 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
 /// an arc above the table, with skewed, off-centre intrinsics; `world_mat_i = 1.7 · K·[R | t]`
 /// (OpenCV axes, an arbitrary homogeneous scale), `image/NNNNNN.png`, `mask/NNN.png` (0/255 RGB).
 pub fn write_dtu(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataError> {
-    let mut scene = AnalyticScene::tabletop(true);
+    write_dtu_of(AnalyticScene::tabletop(true), dir, opts)
+}
+
+/// [`write_dtu`] of another analytic scene (its local frame is the unit sphere's).
+pub fn write_dtu_of(
+    mut scene: AnalyticScene,
+    dir: &Path,
+    opts: &SynthOptions,
+) -> Result<SynthScene, DataError> {
     let world_scale = 30.0f32;
     let shift = [12.0f32, -3.0, 40.0];
     scene.to_world = Similarity {

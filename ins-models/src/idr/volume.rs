@@ -1,0 +1,226 @@
+//! Rendering rays of an IDR model as a volume (NeuS): a coarse pass of the SDF alone (no
+//! gradient, stratified inside the unit sphere) whose section weights at a fixed sharpness say
+//! where the surface is; the fine pass takes samples drawn there plus a stride of the coarse ones,
+//! evaluates the SDF with its exact gradient and the colour at each, and composites NeuS's
+//! section opacities ([`end_alpha`], at the learnable sharpness) in order. Evaluating only
+//! near the surface is what makes a volume step affordable on a CPU: every fine sample carries
+//! forward-mode tangents, a colour and their backward.
+
+use burn::prelude::*;
+use ins_core::render::samplers::{draw_from_weights, stratified};
+use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
+use ins_scene::rays::{Rays, flatten};
+use serde::{Deserialize, Serialize};
+
+use super::model::IdrModel;
+
+/// Where a volume render samples each ray.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct VolumeSampling {
+    /// Stratified samples per ray of the coarse pass (SDF only, no gradient).
+    pub coarse: usize,
+    /// Of those, how many (evenly strided) the fine pass keeps: they hold the ray's empty
+    /// stretches and find surfaces the coarse weights missed.
+    pub kept: usize,
+    /// Samples drawn near the surface from the coarse pass's weights.
+    pub fine: usize,
+    /// Sharpness of the coarse pass's density (NeuS up-samples at 64 and above): wide enough
+    /// that a near miss still draws samples.
+    pub coarse_sharpness: f32,
+}
+
+impl Default for VolumeSampling {
+    fn default() -> Self {
+        Self {
+            coarse: 64,
+            kept: 8,
+            fine: 16,
+            coarse_sharpness: 64.0,
+        }
+    }
+}
+
+/// A volume render of `R` rays under `S` styles, `N` samples a ray.
+pub struct VolumeRender {
+    /// Colour `[S·R, 3]` (style-major), the background behind what the ray leaves clear.
+    pub rgb: Tensor<2>,
+    /// Opacity `[R]`: the silhouette.
+    pub opacity: Tensor<1>,
+    /// Expected distance `Σ wᵢ tᵢ` over the opacity `[R]` (the ray's far end where clear).
+    pub depth: Tensor<1>,
+    /// The SDF's gradient at every sample `[R·N, 3]` (the eikonal term).
+    pub gradients: Tensor<2>,
+    /// 1 for samples inside the unit sphere, 0 for padding `[R·N]`.
+    pub live: Tensor<1>,
+    /// Number of live samples.
+    pub live_count: usize,
+}
+
+/// Each ray's interval inside the unit sphere, `(0, 0)` for rays that miss it.
+fn unit_sphere_intervals(rays: &Rays) -> (Vec<f32>, Vec<f32>) {
+    let mut near = Vec::with_capacity(rays.len());
+    let mut far = Vec::with_capacity(rays.len());
+    for (o, d) in rays.origins.iter().zip(&rays.directions) {
+        let b = o.dot(*d);
+        let disc = b * b - (o.dot(*o) - 1.0);
+        if disc <= 0.0 {
+            near.push(0.0);
+            far.push(0.0);
+            continue;
+        }
+        let root = disc.sqrt();
+        let (t0, t1) = ((-b - root).max(0.0), (-b + root).max(0.0));
+        near.push(t0);
+        far.push(t1);
+    }
+    (near, far)
+}
+
+/// Points `o + t·d` for `t [R, N]`: `[R·N, 3]`.
+fn points(origins: Tensor<2>, dirs: Tensor<2>, t: Tensor<2>) -> Tensor<2> {
+    let [r, n] = t.dims();
+    let o = origins.reshape([r, 1, 3]).expand([r, n, 3]);
+    let d = dirs.reshape([r, 1, 3]).expand([r, n, 3]);
+    (o + d * t.reshape([r, n, 1]).expand([r, n, 3])).reshape([r * n, 3])
+}
+
+/// The fine pass's sample positions `[R, N]`, sorted (no gradient): `kept` of the coarse
+/// stratified samples (jittered by `seed`, at bin centres without) and `fine` drawn from the
+/// coarse pass's weights.
+fn sample_positions(
+    model: &IdrModel,
+    origins: &Tensor<2>,
+    dirs: &Tensor<2>,
+    near: Tensor<1>,
+    far: Tensor<1>,
+    opts: &VolumeSampling,
+    seed: Option<u64>,
+) -> Tensor<2> {
+    let [r] = near.dims();
+    let c = opts.coarse.max(2);
+    let coarse = stratified(near.clone().inner(), far.clone().inner(), c, seed);
+    let stride = (c / opts.kept.max(1)).max(1);
+    let kept_idx: Vec<i64> = (0..c).step_by(stride).map(|i| i as i64).collect();
+    let device = coarse.device();
+    let k = kept_idx.len();
+    let index = Tensor::<1, Int>::from_data(TensorData::new(kept_idx, [k]), &device)
+        .reshape([1, k])
+        .expand([r, k]);
+    let kept = coarse.clone().gather(1, index);
+    if opts.fine == 0 {
+        return kept;
+    }
+    let sdf = model.sdf.valid();
+    let (o, d) = (origins.clone().inner(), dirs.clone().inner());
+    let f = sdf.sdf(points(o, d, coarse.clone())).reshape([r, c]);
+    let live = (far.inner() - near.inner())
+        .greater_elem(0.0)
+        .float()
+        .reshape([r, 1])
+        .expand([r, c - 1]);
+    let s = Tensor::<1>::from_floats([opts.coarse_sharpness], &device);
+    let w = alpha_weights(end_alpha(f, live, s));
+    let mids =
+        (coarse.clone().slice([0..r, 1..c]) + coarse.slice([0..r, 0..c - 1])).mul_scalar(0.5);
+    let fine = draw_from_weights(mids, w, opts.fine, seed.map(|s| s ^ 0x5eed));
+    Tensor::cat(vec![kept, fine], 1).sort(1)
+}
+
+/// Renders `rays` as a volume under each style of `codes` (`[S, n]`, or `None`), on `device`
+/// (autodiff when training). `seed` jitters the samples (training); `None` places them at bin
+/// centres.
+pub fn render_volume(
+    model: &IdrModel,
+    rays: &Rays,
+    codes: Option<Tensor<2>>,
+    background: [f32; 3],
+    opts: &VolumeSampling,
+    seed: Option<u64>,
+    device: &Device,
+) -> VolumeRender {
+    let (near_v, far_v) = unit_sphere_intervals(rays);
+    let live: Vec<bool> = near_v.iter().zip(&far_v).map(|(a, b)| b > a).collect();
+    let near = Tensor::<1>::from_floats(near_v.as_slice(), device);
+    let far = Tensor::<1>::from_floats(far_v.as_slice(), device);
+    let (origins, dirs) = ray_tensors(rays, device);
+    let z = sample_positions(model, &origins, &dirs, near, far, opts, seed);
+    let s = sharpness(model, opts, device);
+    composite_samples(model, origins, dirs, z, &live, s, codes, background)
+}
+
+/// The rays' origins and unit directions, `[R, 3]` each.
+fn ray_tensors(rays: &Rays, device: &Device) -> (Tensor<2>, Tensor<2>) {
+    let r = rays.len();
+    let t = |v: &[ins_scene::geometry::Vec3]| {
+        Tensor::<1>::from_floats(flatten(v).as_slice(), device).reshape([r, 3])
+    };
+    (t(&rays.origins), t(&rays.directions))
+}
+
+/// The run's sharpness `[1]` (the coarse pass's for a model without one).
+fn sharpness(model: &IdrModel, opts: &VolumeSampling, device: &Device) -> Tensor<1> {
+    match &model.sharpness {
+        Some(sharp) => sharp.s(),
+        None => Tensor::from_floats([opts.coarse_sharpness], device),
+    }
+}
+
+/// The SDF with its gradient and the colour at samples `z [R, N]` (sorted along each ray;
+/// rays not `live` are clear), composited with NeuS's section opacities at sharpness `s`.
+#[allow(clippy::too_many_arguments)]
+fn composite_samples(
+    model: &IdrModel,
+    origins: Tensor<2>,
+    dirs: Tensor<2>,
+    z: Tensor<2>,
+    live: &[bool],
+    s: Tensor<1>,
+    codes: Option<Tensor<2>>,
+    background: [f32; 3],
+) -> VolumeRender {
+    let [r, n] = z.dims();
+    let device = origins.device();
+    let x = points(origins, dirs.clone(), z.clone());
+    let (f, features, g) = model.sdf.forward_with_gradient(x.clone());
+    let v = dirs
+        .reshape([r, 1, 3])
+        .expand([r, n, 3])
+        .reshape([r * n, 3]);
+    let lengths = z.clone().slice([0..r, 1..n]) - z.clone().slice([0..r, 0..n - 1]);
+    let live_count = live.iter().filter(|&&l| l).count();
+    let live_rays = Tensor::<1>::from_floats(
+        live.iter()
+            .map(|&l| l as u8 as f32)
+            .collect::<Vec<_>>()
+            .as_slice(),
+        &device,
+    );
+    let live_sections = live_rays.clone().reshape([r, 1]).expand([r, n - 1]);
+    let w = alpha_weights(end_alpha(f.reshape([r, n]), live_sections, s));
+    let opacity: Tensor<1> = w.clone().sum_dim(1).reshape([r]);
+    let centres = z.clone().slice([0..r, 0..n - 1]) + lengths.mul_scalar(0.5);
+    let depth = (w.clone() * centres).sum_dim(1).reshape([r]) / opacity.clone().clamp_min(1e-6);
+    // A section's colour: the mean of its ends'.
+    let colour = model.shade(x, g.clone(), v, features, codes); // [S, R·N, 3]
+    let styles = colour.dims()[0];
+    let colour = colour.reshape([styles, r, n, 3]);
+    let sections = (colour.clone().slice([0..styles, 0..r, 0..n - 1, 0..3])
+        + colour.slice([0..styles, 0..r, 1..n, 0..3]))
+    .mul_scalar(0.5);
+    let shaded: Tensor<3> = (sections * w.reshape([1, r, n - 1, 1]).expand([styles, r, n - 1, 3]))
+        .sum_dim(2)
+        .reshape([styles, r, 3]);
+    let bg = Tensor::<1>::from_floats(background, &device).reshape([1, 1, 3]);
+    let clear = opacity.clone().neg().add_scalar(1.0).reshape([1, r, 1]);
+    let rgb = (shaded + clear.expand([styles, r, 3]) * bg.expand([styles, r, 3]))
+        .reshape([styles * r, 3]);
+    let live = live_rays.reshape([r, 1]).expand([r, n]).reshape([r * n]);
+    VolumeRender {
+        rgb,
+        opacity,
+        depth,
+        gradients: g,
+        live,
+        live_count: live_count * n,
+    }
+}
