@@ -7,8 +7,10 @@
 //! forward-mode tangents, a colour and their backward.
 
 use burn::prelude::*;
+use ins_core::render::gather::select_parallel;
 use ins_core::render::samplers::{draw_from_weights, stratified};
 use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
+use ins_core::shape_buckets::padded_size;
 use ins_scene::rays::{Rays, flatten};
 use serde::{Deserialize, Serialize};
 
@@ -165,6 +167,62 @@ fn sharpness(model: &IdrModel, opts: &VolumeSampling, device: &Device) -> Tensor
     }
 }
 
+/// A section weight below which its ends' colours are not computed: they would move the
+/// pixel by less than this.
+const SEEN: f32 = 1e-4;
+
+/// The colour `[S, R·N, 3]` at the samples whose section weights `w [R, N − 1]` reach [`SEEN`],
+/// zero elsewhere. Most samples of a ray lie in empty space or behind the surface, and the
+/// colour network (with the SIM and AM when stylizing) is most of a sample's cost.
+#[allow(clippy::too_many_arguments)]
+fn shade_where_seen(
+    model: &IdrModel,
+    x: Tensor<2>,
+    g: Tensor<2>,
+    v: Tensor<2>,
+    features: Tensor<2>,
+    codes: Option<Tensor<2>>,
+    w: &Tensor<2>,
+    device: &Device,
+) -> Tensor<3> {
+    let [r, sections] = w.dims();
+    let n = sections + 1;
+    let styles = codes.as_ref().map_or(1, |c| c.dims()[0]);
+    let weights = w
+        .clone()
+        .inner()
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .unwrap_or_default();
+    let mut seen = vec![false; r * n];
+    for (i, &wi) in weights.iter().enumerate() {
+        if wi >= SEEN {
+            let (ray, k) = (i / sections, i % sections);
+            seen[ray * n + k] = true;
+            seen[ray * n + k + 1] = true;
+        }
+    }
+    let picked: Vec<i64> = (0..r * n).filter(|&j| seen[j]).map(|j| j as i64).collect();
+    if picked.is_empty() {
+        return Tensor::zeros([styles, r * n, 3], device);
+    }
+    // On GPUs the count is padded to a bucket (copies of the first pick, read by no sample).
+    let k = padded_size(picked.len(), device);
+    let mut index = picked.clone();
+    index.resize(k, picked[0]);
+    let index = Tensor::<1, Int>::from_data(TensorData::new(index, [k]), device);
+    let pick = |t: Tensor<2>| select_parallel(t, 0, index.clone());
+    let colour = model.shade(pick(x), pick(g), pick(v), pick(features), codes); // [S, K, 3]
+    let mut back = vec![k as i64; r * n];
+    for (slot, &j) in picked.iter().enumerate() {
+        back[j as usize] = slot as i64;
+    }
+    let back = Tensor::<1, Int>::from_data(TensorData::new(back, [r * n]), device);
+    let padded = Tensor::cat(vec![colour, Tensor::zeros([styles, 1, 3], device)], 1);
+    select_parallel(padded, 1, back)
+}
+
 /// The SDF with its gradient and the colour at samples `z [R, N]` (sorted along each ray;
 /// rays not `live` are clear), composited with NeuS's section opacities at sharpness `s`.
 #[allow(clippy::too_many_arguments)]
@@ -201,7 +259,7 @@ fn composite_samples(
     let centres = z.clone().slice([0..r, 0..n - 1]) + lengths.mul_scalar(0.5);
     let depth = (w.clone() * centres).sum_dim(1).reshape([r]) / opacity.clone().clamp_min(1e-6);
     // A section's colour: the mean of its ends'.
-    let colour = model.shade(x, g.clone(), v, features, codes); // [S, R·N, 3]
+    let colour = shade_where_seen(model, x, g.clone(), v, features, codes, &w, &device);
     let styles = colour.dims()[0];
     let colour = colour.reshape([styles, r, n, 3]);
     let sections = (colour.clone().slice([0..styles, 0..r, 0..n - 1, 0..3])
