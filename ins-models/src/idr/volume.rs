@@ -11,6 +11,7 @@ use ins_core::render::gather::select_parallel;
 use ins_core::render::samplers::{draw_from_weights, stratified};
 use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
 use ins_core::shape_buckets::padded_size;
+use ins_scene::geometry::{Bounds, Vec3};
 use ins_scene::rays::{Rays, flatten};
 use serde::{Deserialize, Serialize};
 
@@ -60,22 +61,19 @@ pub struct VolumeRender {
 
 /// Each ray's interval inside the unit sphere, `(0, 0)` for rays that miss it.
 fn unit_sphere_intervals(rays: &Rays) -> (Vec<f32>, Vec<f32>) {
-    let mut near = Vec::with_capacity(rays.len());
-    let mut far = Vec::with_capacity(rays.len());
-    for (o, d) in rays.origins.iter().zip(&rays.directions) {
-        let b = o.dot(*d);
-        let disc = b * b - (o.dot(*o) - 1.0);
-        if disc <= 0.0 {
-            near.push(0.0);
-            far.push(0.0);
-            continue;
-        }
-        let root = disc.sqrt();
-        let (t0, t1) = ((-b - root).max(0.0), (-b + root).max(0.0));
-        near.push(t0);
-        far.push(t1);
-    }
-    (near, far)
+    let sphere = Bounds::Sphere {
+        center: Vec3::ZERO,
+        radius: 1.0,
+    };
+    rays.origins
+        .iter()
+        .zip(&rays.directions)
+        .map(|(&o, &d)| {
+            sphere
+                .intersect(o, d)
+                .map_or((0.0, 0.0), |(t0, t1)| (t0.max(0.0), t1.max(0.0)))
+        })
+        .unzip()
 }
 
 /// Points `o + t·d` for `t [R, N]`: `[R·N, 3]`.
@@ -153,9 +151,7 @@ pub fn render_volume(
 /// The rays' origins and unit directions, `[R, 3]` each.
 fn ray_tensors(rays: &Rays, device: &Device) -> (Tensor<2>, Tensor<2>) {
     let r = rays.len();
-    let t = |v: &[ins_scene::geometry::Vec3]| {
-        Tensor::<1>::from_floats(flatten(v).as_slice(), device).reshape([r, 3])
-    };
+    let t = |v: &[Vec3]| Tensor::<1>::from_floats(flatten(v).as_slice(), device).reshape([r, 3]);
     (t(&rays.origins), t(&rays.directions))
 }
 
