@@ -119,6 +119,12 @@ def build(root, args, jobs):
         "cargo", "test", "--release", "--workspace", "--no-run", "--timings",
         "--message-format=json-render-diagnostics",
     ]
+    # An integration test runs its package's binaries (CARGO_BIN_EXE_*), but cargo links the
+    # test without waiting for them (cargo#7394): such a test program is held back until every
+    # binary of its package is reported built. CI once started wgpu_cli 7 minutes before
+    # ins-cli was linked, and its four tests failed at once with "No such file".
+    bins_missing = binaries_by_package(root)
+    held = []
     proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, text=True)
     for line in proc.stdout:
         try:
@@ -127,14 +133,25 @@ def build(root, args, jobs):
             continue
         if msg.get("reason") != "compiler-artifact" or not msg.get("executable"):
             continue
-        if not msg.get("profile", {}).get("test"):
-            continue
         target = msg["target"]
         kind = target["kind"][0]
         package = os.path.dirname(msg["manifest_path"])
+        if not msg.get("profile", {}).get("test"):
+            if kind == "bin":
+                bins_missing.get(package, set()).discard(target["name"])
+                for job in [j for j in held if not bins_missing.get(j[3])]:
+                    held.remove(job)
+                    jobs.add(job)
+            continue
         label = f"{os.path.basename(package)} {kind} {target['name']}"
-        jobs.add((target["name"], label, [msg["executable"], *args], package))
+        job = (target["name"], label, [msg["executable"], *args], package)
+        if kind in ("test", "bench") and bins_missing.get(package):
+            held.append(job)
+        else:
+            jobs.add(job)
     ok = proc.wait() == 0
+    for job in held:  # the build is over: cargo built every binary it was going to
+        jobs.add(job)
     extra = []
     # The doc tests of the libraries that have any (`doctest = false` marks those without):
     # cargo builds and runs them itself.
@@ -147,13 +164,24 @@ def build(root, args, jobs):
     return ok
 
 
+def workspace_packages(root):
+    """cargo's metadata of the workspace's own packages."""
+    return json.loads(subprocess.run(
+        ["cargo", "metadata", "--format-version", "1", "--no-deps"],
+        cwd=root, stdout=subprocess.PIPE, check=True, text=True).stdout)["packages"]
+
+
+def binaries_by_package(root):
+    """Each package folder's binary target names."""
+    return {os.path.dirname(p["manifest_path"]):
+            {t["name"] for t in p["targets"] if "bin" in t["kind"]}
+            for p in workspace_packages(root)}
+
+
 def doc_tested_packages(root):
     """The workspace packages whose library runs doc tests (cargo's `doctest`, on unless
     `[lib] doctest = false`)."""
-    meta = json.loads(subprocess.run(
-        ["cargo", "metadata", "--format-version", "1", "--no-deps"],
-        cwd=root, stdout=subprocess.PIPE, check=True, text=True).stdout)
-    return [p["name"] for p in meta["packages"]
+    return [p["name"] for p in workspace_packages(root)
             if any("lib" in t["kind"] and t.get("doctest") for t in p["targets"])]
 
 
