@@ -143,16 +143,25 @@ pub fn run(a: Report) -> Result<()> {
         ..ConsistencyOptions::default()
     };
     let device = e.device.device()?;
-    let page = write_report(
+    let report = write_report(
         &a.run, &a.out, a.refresh, &options, &e.vgg, e.quiet, &device,
     )?;
-    println!("{}", page.display());
+    println!("{}", report.index.display());
     Ok(())
 }
 
-/// Writes the report of the stylized run `run` into `out` (its `index.html`, returned, with
-/// the pictures beside it), first running the consistency evaluation with `options` when the
-/// run has none or `refresh` asks for it.
+/// A written report.
+pub struct WrittenReport {
+    /// Its page.
+    pub index: PathBuf,
+    /// The density level its mesh was cut at (NeRF runs with a mesh): a finer mesh of the same
+    /// run reuses it instead of rendering views to find it again.
+    pub mesh_level: Option<f32>,
+}
+
+/// Writes the report of the stylized run `run` into `out` (its `index.html`, with the pictures
+/// beside it), first running the consistency evaluation with `options` when the run has none
+/// or `refresh` asks for it.
 pub fn write_report(
     run: &Path,
     out: &Path,
@@ -161,7 +170,7 @@ pub fn write_report(
     vgg: &crate::common::VggArgs,
     quiet: bool,
     device: &burn::prelude::Device,
-) -> Result<PathBuf> {
+) -> Result<WrittenReport> {
     let eval_dir = run.join("consistency");
     let summary_path = eval_dir.join("summary.json");
     if refresh || !summary_path.is_file() {
@@ -230,7 +239,11 @@ pub fn write_report(
     html.insert_str(at, &mesh_section(&mesh));
     let index = out.join("index.html");
     ins_io::write_atomic(&index, html.as_bytes())?;
-    Ok(index)
+    let mesh_level = mesh
+        .ok()
+        .and_then(|m| m["level"].as_f64())
+        .map(|l| l as f32);
+    Ok(WrittenReport { index, mesh_level })
 }
 
 /// Samples along the longest side of the report's mesh: a few megabytes the page embeds.

@@ -411,13 +411,13 @@ pub fn run(a: Stylize) -> Result<()> {
                 reference_views: 0,
                 ..ConsistencyOptions::default()
             };
-            crate::report_cmd::write_report(
+            let written = crate::report_cmd::write_report(
                 &stylized, &report, true, &options, &a.vgg, a.quiet, &device,
             )?;
             write_video(&stylized, &renders)?;
             let mesh = MeshOptions {
                 resolution: a.mesh_resolution,
-                level: None,
+                level: written.mesh_level,
             };
             // The report meshed the run already (at its own size): where it found no surface,
             // neither would a finer grid, and the report has said why.

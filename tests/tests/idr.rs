@@ -46,6 +46,11 @@ fn small_scene(dir: &std::path::Path) -> IdrRunConfig {
         },
     )
     .unwrap();
+    small_scene_config(scene)
+}
+
+/// A small grid SDF's settings on the synthetic scene in `scene`.
+fn small_scene_config(scene: std::path::PathBuf) -> IdrRunConfig {
     let mut cfg = IdrRunConfig {
         holdout: 4,
         eval_every: Some(0),
@@ -104,14 +109,32 @@ fn pretrain_and_score(
     (run, evals)
 }
 
+/// The notched block's hollow corner is seen against the block from every camera, so masks
+/// cannot carve it; a volume-rendered SDF carves it from the photos' colours. At 128 pixels
+/// after 1200 steps the SDF is positive (empty) at all six points probed inside the notch
+/// (+0.07 to +0.14 where the truth is +0.15 to +0.30); the surface renderer after as many
+/// steps of 1024 rays left the deep half filled (three probes at −0.04 to −0.15), and at 64
+/// pixels (checker squares of 3 pixels) the volume's did too (docs/measurements.md).
 #[test]
-fn volume_rendered_sdf_pretrains_sharpens_and_meshes() {
+fn volume_rendered_sdf_carves_a_corner_masks_cannot() {
+    use ins_scene::data::synthetic::{AnalyticScene, write_dtu_of};
+    use ins_scene::geometry::Vec3;
     let device = Device::flex();
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = small_scene(dir.path());
+    let scene = dir.path().join("scene");
+    write_dtu_of(
+        AnalyticScene::notched_block(),
+        &scene,
+        &SynthOptions {
+            size: 128,
+            views: 24,
+        },
+    )
+    .unwrap();
+    let mut cfg = small_scene_config(scene);
     cfg.renderer = SdfRenderer::Volume;
     cfg.rays = 256;
-    cfg.schedule.steps = 300;
+    cfg.schedule.steps = 1200;
     let run_dir = dir.path().join("volume");
     let (run, _) = pretrain_and_score(&cfg, &run_dir, &device);
     // The learnable sharpness rose from its start (s ≈ 20) as the surface settled: the
@@ -123,8 +146,48 @@ fn volume_rendered_sdf_pretrains_sharpens_and_meshes() {
         .expect("a volume run has a sharpness")
         .value();
     assert!(s > 25.0, "sharpness {s}");
-    let (mesh, _) = extract_mesh(&run.model.valid(), 64, None, &device).unwrap();
-    assert!(mesh.volume() > 0.01, "volume {}", mesh.volume());
+
+    let truth = AnalyticScene::notched_block();
+    let [lo, hi] = AnalyticScene::NOTCH;
+    let inside_notch: Vec<Vec3> = [0.3f32, 0.5, 0.7]
+        .into_iter()
+        .flat_map(|f| {
+            [0.3f32, 0.6].map(|h| {
+                Vec3::new(
+                    lo[0] + f * (hi[0] - lo[0]),
+                    lo[1] + f * (hi[1] - lo[1]),
+                    lo[2] + h * (hi[2] - lo[2]),
+                )
+            })
+        })
+        .collect();
+    // Inside each wall and the slab: an SDF positive everywhere would pass the notch alone.
+    let inside_block = [
+        Vec3::new(0.2, -0.3, -0.1),
+        Vec3::new(-0.3, 0.2, -0.1),
+        Vec3::new(0.2, 0.2, -0.45),
+    ];
+    let sdf = |points: &[Vec3]| {
+        let flat: Vec<f32> = points.iter().flat_map(|p| p.to_array()).collect();
+        ins_models::idr::render::sdf_at(&run.model.sdf, &flat, &device)
+    };
+    let (notch, block) = (sdf(&inside_notch), sdf(&inside_block));
+    eprintln!("SDF inside the notch {notch:?}, inside the block {block:?}");
+    assert!(
+        notch.iter().all(|&d| d > 0.0),
+        "the notch is filled: SDF {notch:?} at {inside_notch:?}"
+    );
+    assert!(block.iter().all(|&d| d < 0.0), "the block is hollow: {block:?}");
+
+    let (mesh, _) = extract_mesh(&run.model.valid(), 96, None, &device).unwrap();
+    let mean = mesh
+        .vertices
+        .iter()
+        .map(|v| truth.foreground_distance(Vec3::from_array(*v)).abs())
+        .sum::<f32>()
+        / mesh.vertices.len() as f32;
+    eprintln!("the mesh's mean distance to the true surface: {mean:.4}");
+    assert!(mean < 0.06, "mesh {mean} from the true surface on average");
 }
 
 #[test]
