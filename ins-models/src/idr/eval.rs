@@ -15,7 +15,7 @@ use ins_scene::rays::{Rays, camera_rays};
 
 use super::model::IdrModel;
 use super::render::render_surface;
-use super::volume::{VolumeSampling, render_volume};
+use super::volume::{VolumeSampling, render_volume_view};
 
 /// Rays per chunk when rendering whole images.
 pub const CHUNK: usize = 16384;
@@ -103,17 +103,16 @@ pub fn render_rays(
         };
         let out = render_surface(model, &chunk, code.clone(), [0.0; 3], trace, false, device);
         if volume {
-            let v = render_volume(
+            let (rgb, opacity) = render_volume_view(
                 model,
                 &chunk,
                 code.clone(),
                 [0.0; 3],
                 &VolumeSampling::default(),
-                None,
                 device,
             );
-            view.rgb.extend(to_vec(v.rgb)?);
-            view.hit.extend(to_vec(v.opacity)?.iter().map(|&o| o > 0.5));
+            view.rgb.extend(rgb);
+            view.hit.extend(opacity.iter().map(|&o| o > 0.5));
         } else {
             view.rgb.extend(to_vec(out.rgb)?);
             view.hit.extend(out.traced.hit.iter().copied());
