@@ -3,6 +3,7 @@
 //! Plus masks, LLFF holdout and spiral, strided patches, paths, and bad input.
 
 mod bad_inputs;
+mod capture_framing;
 mod captures;
 mod loaders;
 mod rays_and_paths;
