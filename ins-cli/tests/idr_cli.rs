@@ -174,12 +174,13 @@ fn train_render_eval_export_and_refuse_bad_input() {
     ]);
     assert_clean_failure(&o, "--grid-max-resolution 5000");
     assert!(!too_fine.join("config.json").exists());
-    // So are a colour grid out of range, a share of rays that is not one and a learning-rate
-    // decay that is not a fraction.
+    // So are a colour grid out of range, a share of rays that is not one, a learning-rate
+    // decay that is not a fraction and a smoothness weight without the volume renderer.
     for (flag, value) in [
         ("--color-grid", "4096"),
         ("--mask-rays", "1.5"),
         ("--lr-decay", "0"),
+        ("--curvature-weight", "0.5"),
     ] {
         let o = cli(&[
             "train",

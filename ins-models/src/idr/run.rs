@@ -39,6 +39,10 @@ pub const BLEND_LR_MULT: f64 = 10.0;
 /// 20 to 66 by step 1000 on scan37, leaving a blurred band outside the silhouette (IoU 0.89).
 pub const SHARPNESS_LR_MULT: f64 = 4.0;
 
+/// Samples near the surface per step where the smoothness term (`--curvature-weight`) looks:
+/// each costs one more forward-mode gradient and its backward.
+const CURVATURE_POINTS: usize = 2048;
+
 /// Loads a scene for surface reconstruction, in the unit-sphere frame IDR works in: DTU ships
 /// it; an object captured from around it (COLMAP, transforms.json, NeRF-synthetic) is placed
 /// there from its masks' visual hull (`ins_scene::data::unit_sphere`), or from its cameras
@@ -141,6 +145,7 @@ impl Variant for Idr {
         cfg.mask_weight = cfg.mask_weight_for();
         cfg.eikonal_points = Some(cfg.eikonal_points_for());
         cfg.eval_every = Some(cfg.eval_every_for());
+        cfg.curvature_weight = Some(cfg.curvature_weight_for());
     }
 
     fn inherit(cfg: &mut IdrRunConfig, base: &IdrRunConfig, from: &Path) -> Result<()> {
@@ -290,6 +295,15 @@ fn validate_pretraining(cfg: &IdrRunConfig) -> Result<()> {
             cfg.mask_rays
         );
     }
+    let curvature = cfg.curvature_weight_for();
+    if !(curvature >= 0.0 && curvature.is_finite()) {
+        bail!("--curvature-weight {curvature}: a weight is 0 or more");
+    }
+    if curvature > 0.0 && cfg.renderer != SdfRenderer::Volume {
+        bail!(
+            "--curvature-weight {curvature}: the smoothness term is the volume renderer's (add --renderer volume)"
+        );
+    }
     if !(cfg.lr_decay > 0.0 && cfg.lr_decay <= 1.0) {
         bail!(
             "--lr-decay {}: the final learning rate is a fraction of the first, above 0 and at most 1",
@@ -323,6 +337,9 @@ pub fn pretrain_task(
     task.eikonal_points = cfg.eikonal_points_for();
     task.renderer = cfg.renderer;
     task.sampling = cfg.volume_sampling();
+    if cfg.renderer == SdfRenderer::Volume && cfg.curvature_weight_for() > 0.0 {
+        task.curvature_points = CURVATURE_POINTS;
+    }
     Ok(task)
 }
 
@@ -340,7 +357,12 @@ pub fn pretrain_phase(cfg: &IdrRunConfig) -> Phase<IdrObjective> {
         .weight("mse_mask", 0.0)
         .weight("eikonal", cfg.eikonal_weight);
     let phase = if cfg.renderer == SdfRenderer::Volume {
-        phase.lr_mult("sharpness", SHARPNESS_LR_MULT)
+        let phase = phase.lr_mult("sharpness", SHARPNESS_LR_MULT);
+        if cfg.curvature_weight_for() > 0.0 {
+            phase.weight("curvature", cfg.curvature_weight_for())
+        } else {
+            phase
+        }
     } else {
         phase
     };

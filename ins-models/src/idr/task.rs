@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use burn::prelude::*;
 use ins_core::loss::{PerceptualLoss, patch_images, photo_patch, psnr};
+use ins_core::render::gather::select_parallel;
 use ins_core::render::sphere_tracing::TraceOptions;
 use ins_core::shape_buckets::{pad_rows, padded_size, sum_counted};
 use ins_core::train::{LossTerms, StepContext, Task};
@@ -73,6 +74,9 @@ pub struct IdrTask {
     pub renderer: SdfRenderer,
     /// The volume renderer's samples.
     pub sampling: VolumeSampling,
+    /// Samples near the surface per step where the smoothness term compares the SDF's
+    /// gradient with its value a small step away (0: no such term).
+    pub curvature_points: usize,
     device: Device,
 }
 
@@ -104,6 +108,7 @@ impl IdrTask {
             mask_rays: None,
             renderer: SdfRenderer::Surface,
             sampling: VolumeSampling::default(),
+            curvature_points: 0,
             device: device.clone(),
         }
     }
@@ -179,6 +184,7 @@ impl IdrTask {
         // Eikonal: every sample inside the unit sphere, and random points of its box.
         let per_sample = out
             .gradients
+            .clone()
             .square()
             .sum_dim(1)
             .sqrt()
@@ -200,7 +206,14 @@ impl IdrTask {
                     .sum();
             counted += rows;
         }
-        Ok(terms.term("eikonal", eik.div_scalar(counted.max(1) as f32)))
+        let terms = terms.term("eikonal", eik.div_scalar(counted.max(1) as f32));
+        Ok(match self.curvature_points {
+            0 => terms,
+            k => terms.term(
+                "curvature",
+                gradient_change(model, &out.points, &out.gradients, &out.seen, k, seed),
+            ),
+        })
     }
 
     /// The SDF's gradient at `eikonal_points` random points of the unit sphere's box.
@@ -365,8 +378,8 @@ impl Task for IdrTask {
 
     fn terms(&self, objective: IdrObjective) -> &'static [&'static str] {
         match (objective, self.masked) {
-            (IdrObjective::Pretrain, true) => &["rgb", "mse_mask", "mask", "eikonal"],
-            (IdrObjective::Pretrain, false) => &["rgb", "mse_mask", "eikonal"],
+            (IdrObjective::Pretrain, true) => &["rgb", "mse_mask", "mask", "eikonal", "curvature"],
+            (IdrObjective::Pretrain, false) => &["rgb", "mse_mask", "eikonal", "curvature"],
             (IdrObjective::Stylize, _) => &["style", "content"],
         }
     }
@@ -422,4 +435,62 @@ impl Task for IdrTask {
             ),
         ])
     }
+}
+
+/// How far the smoothness term looks: a step of this length in a random direction, about
+/// five of the finest grid cells (1024 across the unit sphere's box) and a tenth of a checker
+/// square on the synthetic scenes: long enough to see texture bent into the surface, short
+/// next to the object's own corners.
+const CURVATURE_STEP: f32 = 0.01;
+
+/// The smoothness term: the mean squared change of the SDF's gradient `g` (rows of `points`)
+/// over a step of [`CURVATURE_STEP`] in a random direction, at up to `k` of the samples `seen`
+/// (drawn by `seed`). Zero when nothing was seen.
+fn gradient_change(
+    model: &IdrModel,
+    points: &Tensor<2>,
+    g: &Tensor<2>,
+    seen: &[usize],
+    k: usize,
+    seed: u64,
+) -> Tensor<1> {
+    let device = points.device();
+    if seen.is_empty() {
+        return Tensor::zeros([1], &device);
+    }
+    let mut rng = SmallRng::seed_from_u64(seed ^ 0xc0be);
+    let chosen: Vec<i64> = if seen.len() <= k {
+        seen.iter().map(|&i| i as i64).collect()
+    } else {
+        rand::seq::index::sample(&mut rng, seen.len(), k)
+            .into_iter()
+            .map(|j| seen[j] as i64)
+            .collect()
+    };
+    let m = chosen.len();
+    // Padded to a bucketed count on GPUs (copies of the first point, left out of the mean).
+    let padded = padded_size(m, &device);
+    let mut chosen = chosen;
+    chosen.resize(padded, chosen[0]);
+    let steps: Vec<f32> = (0..padded)
+        .flat_map(|_| {
+            let d = loop {
+                let v = [0; 3].map(|_| rng.random::<f32>() * 2.0 - 1.0);
+                let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                if n > 1e-3 && n <= 1.0 {
+                    break v.map(|c| c / n);
+                }
+            };
+            d.map(|c| c * CURVATURE_STEP)
+        })
+        .collect();
+    let index = Tensor::<1, Int>::from_data(TensorData::new(chosen, [padded]), &device);
+    let here = select_parallel(points.clone(), 0, index.clone());
+    let there = here + Tensor::<1>::from_floats(steps.as_slice(), &device).reshape([padded, 3]);
+    let g_there = model.sdf.forward_with_gradient(there).2;
+    let change = (select_parallel(g.clone(), 0, index) - g_there)
+        .square()
+        .sum_dim(1)
+        .reshape([padded]);
+    sum_counted(change, m).div_scalar(m as f32)
 }

@@ -57,6 +57,11 @@ pub struct VolumeRender {
     pub live: Tensor<1>,
     /// Number of live samples.
     pub live_count: usize,
+    /// The sample positions `[R·N, 3]`.
+    pub points: Tensor<2>,
+    /// The samples (rows of `points`) whose colour counts: those of sections weighing at
+    /// least [`SEEN`], near the surface.
+    pub seen: Vec<usize>,
 }
 
 /// Each ray's interval inside the unit sphere, `(0, 0)` for rays that miss it.
@@ -99,7 +104,11 @@ fn coarse_pass(
     let c = opts.coarse.max(2);
     let coarse = stratified(near.clone().inner(), far.clone().inner(), c, seed);
     let (o, d) = (origins.clone().inner(), dirs.clone().inner());
-    let f = model.sdf.valid().sdf(points(o, d, coarse.clone())).reshape([r, c]);
+    let f = model
+        .sdf
+        .valid()
+        .sdf(points(o, d, coarse.clone()))
+        .reshape([r, c]);
     (coarse, f)
 }
 
@@ -185,7 +194,12 @@ pub fn render_volume_view(
 ) -> (Vec<f32>, Vec<f32>) {
     let styles = codes.as_ref().map_or(1, |c| c.dims()[0]);
     let r = rays.len();
-    let mut rgb: Vec<f32> = background.iter().copied().cycle().take(styles * r * 3).collect();
+    let mut rgb: Vec<f32> = background
+        .iter()
+        .copied()
+        .cycle()
+        .take(styles * r * 3)
+        .collect();
     let mut opacity = vec![0.0f32; r];
     let (near_v, far_v) = unit_sphere_intervals(rays);
     let inside: Vec<usize> = (0..r).filter(|&i| far_v[i] > near_v[i]).collect();
@@ -225,8 +239,13 @@ pub fn render_volume_view(
     let near_surface: Vec<usize> = (0..inside.len())
         .filter(|&j| {
             let spacing = (inner.far[j] - inner.near[j]) / c as f32;
-            let least = f[j * c..(j + 1) * c].iter().copied().fold(f32::INFINITY, f32::min);
-            !(least > 0.5 * spacing + CLEAR_MARGIN / s)
+            let least = f[j * c..(j + 1) * c]
+                .iter()
+                .copied()
+                .fold(f32::INFINITY, f32::min);
+            // NaN counts as near: such a ray gets the full render and shows it.
+            least.partial_cmp(&(0.5 * spacing + CLEAR_MARGIN / s))
+                != Some(std::cmp::Ordering::Greater)
         })
         .collect();
     if near_surface.is_empty() {
@@ -234,7 +253,15 @@ pub fn render_volume_view(
     }
     // The full render of those alone (their coarse pass again: a small share of the cost).
     let rays_near: Vec<usize> = near_surface.iter().map(|&j| inside[j]).collect();
-    let out = render_volume(model, &sub(&rays_near), codes, background, opts, None, device);
+    let out = render_volume(
+        model,
+        &sub(&rays_near),
+        codes,
+        background,
+        opts,
+        None,
+        device,
+    );
     let to_vec = |t: Tensor<2>| {
         t.into_data()
             .convert::<f32>()
@@ -274,7 +301,7 @@ fn sharpness(model: &IdrModel, opts: &VolumeSampling, device: &Device) -> Tensor
 const SEEN: f32 = 1e-4;
 
 /// The colour `[S, R·N, 3]` at the samples whose section weights `w [R, N − 1]` reach [`SEEN`],
-/// zero elsewhere. Most samples of a ray lie in empty space or behind the surface, and the
+/// zero elsewhere, and those samples' indices. Most samples of a ray lie in empty space or behind the surface, and the
 /// colour network (with the SIM and AM when stylizing) is most of a sample's cost.
 #[allow(clippy::too_many_arguments)]
 fn shade_where_seen(
@@ -286,7 +313,7 @@ fn shade_where_seen(
     codes: Option<Tensor<2>>,
     w: &Tensor<2>,
     device: &Device,
-) -> Tensor<3> {
+) -> (Tensor<3>, Vec<usize>) {
     let [r, sections] = w.dims();
     let n = sections + 1;
     let styles = codes.as_ref().map_or(1, |c| c.dims()[0]);
@@ -307,7 +334,7 @@ fn shade_where_seen(
     }
     let picked: Vec<i64> = (0..r * n).filter(|&j| seen[j]).map(|j| j as i64).collect();
     if picked.is_empty() {
-        return Tensor::zeros([styles, r * n, 3], device);
+        return (Tensor::zeros([styles, r * n, 3], device), Vec::new());
     }
     // On GPUs the count is padded to a bucket (copies of the first pick, read by no sample).
     let k = padded_size(picked.len(), device);
@@ -322,7 +349,8 @@ fn shade_where_seen(
     }
     let back = Tensor::<1, Int>::from_data(TensorData::new(back, [r * n]), device);
     let padded = Tensor::cat(vec![colour, Tensor::zeros([styles, 1, 3], device)], 1);
-    select_parallel(padded, 1, back)
+    let seen = picked.iter().map(|&j| j as usize).collect();
+    (select_parallel(padded, 1, back), seen)
 }
 
 /// The SDF with its gradient and the colour at samples `z [R, N]` (sorted along each ray;
@@ -361,7 +389,8 @@ fn composite_samples(
     let centres = z.clone().slice([0..r, 0..n - 1]) + lengths.mul_scalar(0.5);
     let depth = (w.clone() * centres).sum_dim(1).reshape([r]) / opacity.clone().clamp_min(1e-6);
     // A section's colour: the mean of its ends'.
-    let colour = shade_where_seen(model, x, g.clone(), v, features, codes, &w, &device);
+    let (colour, seen) =
+        shade_where_seen(model, x.clone(), g.clone(), v, features, codes, &w, &device);
     let styles = colour.dims()[0];
     let colour = colour.reshape([styles, r, n, 3]);
     let sections = (colour.clone().slice([0..styles, 0..r, 0..n - 1, 0..3])
@@ -382,6 +411,8 @@ fn composite_samples(
         gradients: g,
         live,
         live_count: live_count * n,
+        points: x,
+        seen,
     }
 }
 
@@ -423,8 +454,7 @@ mod tests {
             values(full.rgb),
             values(full.opacity.reshape([rays.len(), 1])),
         );
-        let (rgb, opacity) =
-            render_volume_view(&model, &rays, None, background, &opts, &device);
+        let (rgb, opacity) = render_volume_view(&model, &rays, None, background, &opts, &device);
         let worst = |a: &[f32], b: &[f32]| {
             a.iter()
                 .zip(b)
@@ -438,6 +468,9 @@ mod tests {
             .filter(|&i| opacity[i] == 0.0 && full_opacity[i] > 0.0)
             .count();
         assert!(hits > 10, "{hits} rays meet the sphere");
-        assert!(left_clear > 10, "{left_clear} rays inside the unit sphere were skipped");
+        assert!(
+            left_clear > 10,
+            "{left_clear} rays inside the unit sphere were skipped"
+        );
     }
 }
