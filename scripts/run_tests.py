@@ -41,12 +41,12 @@ LAVAPIPE = ["wgpu_steps", "wgpu_cli", "backends", "vgg_import", "hash_grid"]
 # The slowest CPU programs, slowest first (same machine, beside the lavapipe lane): starting
 # them first keeps the last minutes from being one long program alone.
 SLOWEST_FIRST = [
+    "idr",  # 386 s with the notched block's volume test (nineteenth session)
     "capture_cli",
     "nerf",
     "viewer_cli",
     "report_cli",
     "stylize_cli",
-    "idr",
     "nerf_cli",
     "siren",
     "stylize2d",
