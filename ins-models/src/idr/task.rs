@@ -182,8 +182,10 @@ impl IdrTask {
             terms = terms.term("mask", bce);
         }
         // Eikonal: every sample inside the unit sphere, and random points of its box.
-        let per_sample = out
-            .gradients
+        let Some(gradients) = out.gradients.clone() else {
+            anyhow::bail!("a training render carries every sample's gradient");
+        };
+        let per_sample = gradients
             .clone()
             .square()
             .sum_dim(1)
@@ -211,7 +213,7 @@ impl IdrTask {
             0 => terms,
             k => terms.term(
                 "curvature",
-                gradient_change(model, &out.points, &out.gradients, &out.seen, k, seed),
+                gradient_change(model, &out.points, &gradients, &out.seen, k, seed),
             ),
         })
     }

@@ -51,8 +51,9 @@ pub struct VolumeRender {
     pub opacity: Tensor<1>,
     /// Expected distance `Σ wᵢ tᵢ` over the opacity `[R]` (the ray's far end where clear).
     pub depth: Tensor<1>,
-    /// The SDF's gradient at every sample `[R·N, 3]` (the eikonal term).
-    pub gradients: Tensor<2>,
+    /// The SDF's gradient at every sample `[R·N, 3]` (the eikonal term); `None` from
+    /// [`render_volume_view`], which computes it only where the colour needs a normal.
+    pub gradients: Option<Tensor<2>>,
     /// 1 for samples inside the unit sphere, 0 for padding `[R·N]`.
     pub live: Tensor<1>,
     /// Number of live samples.
@@ -148,8 +149,8 @@ fn fine_positions(
 }
 
 /// Renders `rays` as a volume under each style of `codes` (`[S, n]`, or `None`), on `device`
-/// (autodiff when training). `seed` jitters the samples (training); `None` places them at bin
-/// centres.
+/// (autodiff when training), with the SDF's gradient at every sample. `seed` jitters the
+/// samples (training); `None` places them at bin centres.
 pub fn render_volume(
     model: &IdrModel,
     rays: &Rays,
@@ -157,6 +158,22 @@ pub fn render_volume(
     background: [f32; 3],
     opts: &VolumeSampling,
     seed: Option<u64>,
+    device: &Device,
+) -> VolumeRender {
+    render_volume_with(model, rays, codes, background, opts, seed, true, device)
+}
+
+/// [`render_volume`], with the SDF's gradient at every sample or (`every_gradient` false) only
+/// at the samples whose colour is computed.
+#[allow(clippy::too_many_arguments)]
+fn render_volume_with(
+    model: &IdrModel,
+    rays: &Rays,
+    codes: Option<Tensor<2>>,
+    background: [f32; 3],
+    opts: &VolumeSampling,
+    seed: Option<u64>,
+    every_gradient: bool,
     device: &Device,
 ) -> VolumeRender {
     let (near_v, far_v) = unit_sphere_intervals(rays);
@@ -167,7 +184,7 @@ pub fn render_volume(
     let (coarse, f) = coarse_pass(model, &origins, &dirs, &near, &far, opts, seed);
     let z = fine_positions(coarse, f, near, far, opts, seed);
     let s = sharpness(model, opts, device);
-    composite_samples(model, origins, dirs, z, &live, s, codes, background)
+    composite_samples(model, origins, dirs, z, &live, s, codes, background, every_gradient)
 }
 
 /// How far (in units of the model's `1/s`) a ray must stay from the surface to be left clear
@@ -253,13 +270,14 @@ pub fn render_volume_view(
     }
     // The full render of those alone (their coarse pass again: a small share of the cost).
     let rays_near: Vec<usize> = near_surface.iter().map(|&j| inside[j]).collect();
-    let out = render_volume(
+    let out = render_volume_with(
         model,
         &sub(&rays_near),
         codes,
         background,
         opts,
         None,
+        false,
         device,
     );
     let to_vec = |t: Tensor<2>| {
@@ -301,13 +319,14 @@ fn sharpness(model: &IdrModel, opts: &VolumeSampling, device: &Device) -> Tensor
 const SEEN: f32 = 1e-4;
 
 /// The colour `[S, R·N, 3]` at the samples whose section weights `w [R, N − 1]` reach [`SEEN`],
-/// zero elsewhere, and those samples' indices. Most samples of a ray lie in empty space or behind the surface, and the
+/// zero elsewhere, and those samples' indices. The SDF's gradient `g` at every sample, or
+/// `None` to compute it at those samples only. Most samples of a ray lie in empty space or behind the surface, and the
 /// colour network (with the SIM and AM when stylizing) is most of a sample's cost.
 #[allow(clippy::too_many_arguments)]
 fn shade_where_seen(
     model: &IdrModel,
     x: Tensor<2>,
-    g: Tensor<2>,
+    g: Option<Tensor<2>>,
     v: Tensor<2>,
     features: Tensor<2>,
     codes: Option<Tensor<2>>,
@@ -342,7 +361,11 @@ fn shade_where_seen(
     index.resize(k, picked[0]);
     let index = Tensor::<1, Int>::from_data(TensorData::new(index, [k]), device);
     let pick = |t: Tensor<2>| select_parallel(t, 0, index.clone());
-    let colour = model.shade(pick(x), pick(g), pick(v), pick(features), codes); // [S, K, 3]
+    let normals = match g {
+        Some(g) => pick(g),
+        None => model.sdf.forward_with_gradient(pick(x.clone())).2,
+    };
+    let colour = model.shade(pick(x), normals, pick(v), pick(features), codes); // [S, K, 3]
     let mut back = vec![k as i64; r * n];
     for (slot, &j) in picked.iter().enumerate() {
         back[j as usize] = slot as i64;
@@ -353,8 +376,9 @@ fn shade_where_seen(
     (select_parallel(padded, 1, back), seen)
 }
 
-/// The SDF with its gradient and the colour at samples `z [R, N]` (sorted along each ray;
-/// rays not `live` are clear), composited with NeuS's section opacities at sharpness `s`.
+/// The SDF (with its gradient at every sample when `every_gradient`) and the colour at samples
+/// `z [R, N]` (sorted along each ray; rays not `live` are clear), composited with NeuS's
+/// section opacities at sharpness `s`.
 #[allow(clippy::too_many_arguments)]
 fn composite_samples(
     model: &IdrModel,
@@ -365,11 +389,18 @@ fn composite_samples(
     s: Tensor<1>,
     codes: Option<Tensor<2>>,
     background: [f32; 3],
+    every_gradient: bool,
 ) -> VolumeRender {
     let [r, n] = z.dims();
     let device = origins.device();
     let x = points(origins, dirs.clone(), z.clone());
-    let (f, features, g) = model.sdf.forward_with_gradient(x.clone());
+    let (f, features, g) = if every_gradient {
+        let (f, features, g) = model.sdf.forward_with_gradient(x.clone());
+        (f, features, Some(g))
+    } else {
+        let (f, features) = model.sdf.forward(x.clone());
+        (f, features, None)
+    };
     let v = dirs
         .reshape([r, 1, 3])
         .expand([r, n, 3])
