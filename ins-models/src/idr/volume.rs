@@ -184,7 +184,17 @@ fn render_volume_with(
     let (coarse, f) = coarse_pass(model, &origins, &dirs, &near, &far, opts, seed);
     let z = fine_positions(coarse, f, near, far, opts, seed);
     let s = sharpness(model, opts, device);
-    composite_samples(model, origins, dirs, z, &live, s, codes, background, every_gradient)
+    composite_samples(
+        model,
+        origins,
+        dirs,
+        z,
+        &live,
+        s,
+        codes,
+        background,
+        every_gradient,
+    )
 }
 
 /// How far (in units of the model's `1/s`) a ray must stay from the surface to be left clear
