@@ -197,6 +197,14 @@ fn render_volume_with(
     )
 }
 
+/// A tensor's values on the host (empty if they cannot be read).
+fn host<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .unwrap_or_default()
+}
+
 /// How far (in units of the model's `1/s`) a ray must stay from the surface to be left clear
 /// by [`render_volume_view`]: its opacity is then below `σ(−10)` ≈ 5e-5.
 const CLEAR_MARGIN: f32 = 10.0;
@@ -250,18 +258,11 @@ pub fn render_volume_view(
     };
     let (_, f) = coarse_pass(model, &origins, &dirs, &near, &far, &probe, None);
     let c = probe.coarse;
-    let f = f
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .unwrap_or_default();
-    let s = sharpness(model, opts, device)
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .ok()
-        .and_then(|v| v.first().copied())
-        .unwrap_or(opts.coarse_sharpness)
+    let f = host(f);
+    let s = model
+        .sharpness
+        .as_ref()
+        .map_or(opts.coarse_sharpness, |s| s.value())
         .max(1.0);
     let near_surface: Vec<usize> = (0..inside.len())
         .filter(|&j| {
@@ -290,14 +291,8 @@ pub fn render_volume_view(
         false,
         device,
     );
-    let to_vec = |t: Tensor<2>| {
-        t.into_data()
-            .convert::<f32>()
-            .try_into_vec::<f32>()
-            .unwrap_or_default()
-    };
-    let colour = to_vec(out.rgb);
-    let alpha = to_vec(out.opacity.reshape([rays_near.len(), 1]));
+    let colour = host(out.rgb);
+    let alpha = host(out.opacity);
     let m = rays_near.len();
     for (k, &i) in rays_near.iter().enumerate() {
         opacity[i] = alpha[k];
@@ -346,13 +341,7 @@ fn shade_where_seen(
     let [r, sections] = w.dims();
     let n = sections + 1;
     let styles = codes.as_ref().map_or(1, |c| c.dims()[0]);
-    let weights = w
-        .clone()
-        .inner()
-        .into_data()
-        .convert::<f32>()
-        .try_into_vec::<f32>()
-        .unwrap_or_default();
+    let weights = host(w.clone().inner());
     let mut seen = vec![false; r * n];
     for (i, &wi) in weights.iter().enumerate() {
         if wi >= SEEN {
