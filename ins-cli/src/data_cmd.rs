@@ -57,8 +57,9 @@ pub enum DataCommand {
         format: SceneFormat,
         /// Captures (colmap, transforms): `object` (around a tabletop in a room), `studio` (around
         /// the tabletop's objects before a plain backdrop) or `forward` (a forward-facing grid).
-        /// DTU: `object` (the tabletop) or `notched` (a block with a hollow corner that masks
-        /// alone cannot carve, for checking that a surface keeps its concavities).
+        /// DTU: `object` (the tabletop), `notched` (a block with a hollow corner that masks
+        /// alone cannot carve, for checking that a surface keeps its concavities) or `domed`
+        /// (the tabletop's objects inside a painted dome, for training without masks).
         #[arg(long, default_value = "object")]
         layout: String,
         /// COLMAP: write the model as text instead of binary.
@@ -144,17 +145,18 @@ pub fn run(cmd: DataCommand) -> Result<()> {
                 bail!("--mixed-orientations is for --format transforms");
             }
             let opts = SynthOptions { size, views };
-            if layout == "notched" {
+            let dtu_only = match layout.as_str() {
+                "notched" => Some(("a notched block", synthetic::AnalyticScene::notched_block())),
+                "domed" => Some(("objects inside a dome", synthetic::AnalyticScene::domed())),
+                _ => None,
+            };
+            if let Some((what, scene)) = dtu_only {
                 if format != SceneFormat::Dtu {
-                    bail!("--layout notched is for --format dtu");
+                    bail!("--layout {layout} is for --format dtu");
                 }
-                let s = synthetic::write_dtu_of(
-                    synthetic::AnalyticScene::notched_block(),
-                    &out,
-                    &opts,
-                )?;
+                let s = synthetic::write_dtu_of(scene, &out, &opts)?;
                 println!(
-                    "wrote a notched block as a dtu scene with {} views to {}",
+                    "wrote {what} as a dtu scene with {} views to {}",
                     s.views.len(),
                     out.display()
                 );
@@ -164,7 +166,9 @@ pub fn run(cmd: DataCommand) -> Result<()> {
                 "object" => synthetic::CaptureLayout::ObjectCentred,
                 "studio" => synthetic::CaptureLayout::Studio,
                 "forward" => synthetic::CaptureLayout::ForwardFacing,
-                other => bail!("--layout {other}: expected object, studio, forward or notched"),
+                other => {
+                    bail!("--layout {other}: expected object, studio, forward, notched or domed")
+                }
             };
             let encoding = if text {
                 Encoding::Text

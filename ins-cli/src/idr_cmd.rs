@@ -170,17 +170,16 @@ pub fn eval(a: EvalIdr) -> Result<()> {
     let code = run.code(None, &device)?;
     let evals = evaluate_views(
         &run.model.valid(),
-        &run.scene(),
+        run.scene(),
         &views,
         code,
-        run.masked(),
         &TraceOptions::default(),
         &device,
     )?;
     for e in &evals {
         println!(
             "{}",
-            serde_json::json!({"view": e.view, "iou": (e.iou * 10000.0).round() / 10000.0, "psnr_mask": (e.psnr_mask * 1000.0).round() / 1000.0})
+            serde_json::json!({"view": e.view, "iou": (e.iou * 10000.0).round() / 10000.0, "psnr_mask": (e.psnr_mask * 1000.0).round() / 1000.0, "psnr": (e.psnr * 1000.0).round() / 1000.0})
         );
     }
     let n = evals.len() as f64;
@@ -191,6 +190,10 @@ pub fn eval(a: EvalIdr) -> Result<()> {
             "views": evals.len(),
             "iou": (evals.iter().map(|e| e.iou).sum::<f64>() / n * 10000.0).round() / 10000.0,
             "psnr_mask": (evals.iter().map(|e| e.psnr_mask).sum::<f64>() / n * 1000.0).round() / 1000.0,
+            "psnr": (evals.iter().map(|e| e.psnr).sum::<f64>() / n * 1000.0).round() / 1000.0,
+            // Whether training saw the masks (without them, the scores are against masks it
+            // never used).
+            "masks_used": run.masked(),
         })
     );
     Ok(())

@@ -2,6 +2,7 @@
 //! compositing, signed distance fields as volumes (NeuS) and their sphere tracing. Cameras,
 //! rays and patches come from `ins-scene`, in its one camera convention.
 
+pub mod beyond_sphere;
 pub mod gather;
 pub mod occupancy;
 pub mod samplers;

@@ -165,6 +165,7 @@ impl IdrRunConfig {
             color_width: self.color_width,
             color_grid: self.color_grid,
             renderer: self.renderer,
+            background: self.no_mask && self.renderer == SdfRenderer::Volume,
         }
     }
 

@@ -167,6 +167,8 @@ pub struct SurfaceEval {
     pub iou: f64,
     /// PSNR over the mask's pixels.
     pub psnr_mask: f64,
+    /// PSNR over the whole image (background included: a run without masks learns it).
+    pub psnr: f64,
 }
 
 impl SurfaceEval {
@@ -198,13 +200,14 @@ impl SurfaceEval {
     }
 }
 
-/// Renders and scores `views`. Without masks, the IoU compares with all pixels.
+/// Renders and scores `views` against the scene's masks wherever it has them, whether or not
+/// the run trained with them (a run without masks is scored against masks it never saw);
+/// without masks, the IoU compares with all pixels.
 pub fn evaluate_views(
     model: &IdrModel,
     scene: &Scene,
     views: &[usize],
     code: Option<Tensor<2>>,
-    masked: bool,
     trace: &TraceOptions,
     device: &Device,
 ) -> Result<Vec<SurfaceEval>> {
@@ -216,21 +219,24 @@ pub fn evaluate_views(
             .ok_or_else(|| anyhow::anyhow!("view {view} does not exist"))?;
         let render = render_camera(model, scene, &v.camera, code.clone(), trace, device)?;
         let photo = v.image.to_f32();
-        let mask: Vec<bool> = match (&v.mask, masked) {
-            (Some(m), true) => m.data.iter().map(|&b| b >= 128).collect(),
-            _ => vec![true; photo.len() / 3],
+        let mask: Vec<bool> = match &v.mask {
+            Some(m) => m.data.iter().map(|&b| b >= 128).collect(),
+            None => vec![true; photo.len() / 3],
         };
         let (mut inter, mut union) = (0usize, 0usize);
-        let (mut se, mut count) = (0f64, 0usize);
+        let (mut se, mut count, mut se_all) = (0f64, 0usize, 0f64);
         for i in 0..mask.len() {
             let (m, h) = (mask[i], render.hit[i]);
             inter += (m && h) as usize;
             union += (m || h) as usize;
+            let pixel: f64 = (0..3)
+                .map(|c| {
+                    ((render.rgb[i * 3 + c].clamp(0.0, 1.0) - photo[i * 3 + c]) as f64).powi(2)
+                })
+                .sum();
+            se_all += pixel;
             if m {
-                for c in 0..3 {
-                    se +=
-                        ((render.rgb[i * 3 + c].clamp(0.0, 1.0) - photo[i * 3 + c]) as f64).powi(2);
-                }
+                se += pixel;
                 count += 3;
             }
         }
@@ -238,6 +244,7 @@ pub fn evaluate_views(
             view,
             iou: inter as f64 / union.max(1) as f64,
             psnr_mask: psnr(se / count.max(1) as f64),
+            psnr: psnr(se_all / photo.len().max(1) as f64),
             render,
             photo,
             mask,

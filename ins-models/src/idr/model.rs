@@ -3,6 +3,9 @@
 //! AM that fuses them into the SDF features the rendering network sees.
 
 use burn::prelude::*;
+use ins_core::modules::color_head::{ColorHeadConfig, DirEncoding};
+use ins_core::modules::field::{Field, Geometry};
+use ins_core::modules::grid_field::GridGeometryConfig;
 use ins_core::modules::hash_grid::HashGridConfig;
 use ins_core::modules::radiance_am::FeatureBlend;
 use ins_core::modules::sdf::{SdfGridConfig, SdfMlpConfig, SdfNet};
@@ -101,6 +104,9 @@ pub struct IdrModel {
     pub stylizer: Option<SurfaceStylizer>,
     /// The volume renderer's sharpness (runs pretrained as a volume only).
     pub sharpness: Option<Sharpness>,
+    /// What lies beyond the unit sphere (volume runs without masks only): a radiance field
+    /// over contracted space, composited behind the SDF.
+    pub background: Option<Field>,
 }
 
 impl Optimizable for IdrModel {
@@ -113,6 +119,9 @@ impl Optimizable for IdrModel {
         ];
         if self.sharpness.is_some() {
             groups.push(GroupSpec::new("sharpness", &["sharpness"]));
+        }
+        if self.background.is_some() {
+            groups.push(GroupSpec::new("background", &["background"]));
         }
         if let Some(s) = &self.stylizer {
             groups.push(GroupSpec::new("sim", &["stylizer.sim"]));
@@ -147,6 +156,10 @@ pub struct IdrArch {
     /// How pretraining renders the SDF (a volume adds the learnable sharpness).
     #[serde(default)]
     pub renderer: SdfRenderer,
+    /// Whether a radiance field beyond the unit sphere shows behind the SDF (NeRF++): what
+    /// photos without masks need, the room behind the object having to live somewhere.
+    #[serde(default)]
+    pub background: bool,
 }
 
 impl IdrArch {
@@ -186,6 +199,26 @@ impl IdrArch {
     }
 }
 
+/// The field beyond the unit sphere: a hash grid over the contracted shell (radii 1 to 2, in
+/// the box of side 4) with instant-ngp's density network and a view-dependent colour head. A
+/// panorama at a few hundred cells across is what photos of a room at 400 px resolve.
+fn background_field(device: &Device) -> Field {
+    let geometry = GridGeometryConfig::new(
+        HashGridConfig::new()
+            .with_log2_table(16)
+            .with_max_resolution(256),
+    )
+    .init([-2.0, -2.0, -2.0, 2.0, 2.0, 2.0], device);
+    let color = ColorHeadConfig::new(geometry.d_features(), DirEncoding::SphericalHarmonics)
+        .with_d_hidden(64)
+        .with_depth(2)
+        .init(device);
+    Field {
+        geometry: Geometry::Grid(geometry),
+        color,
+    }
+}
+
 impl IdrModel {
     /// A fresh model: the SDF starts as a sphere of radius `arch.radius` inside the unit sphere.
     pub fn new(arch: &IdrArch, device: &Device) -> Self {
@@ -221,6 +254,7 @@ impl IdrModel {
             stylizer: None,
             sharpness: (arch.renderer == SdfRenderer::Volume)
                 .then(|| Sharpness::new(INITIAL_VARIANCE, device)),
+            background: arch.background.then(|| background_field(device)),
         }
     }
 

@@ -66,7 +66,7 @@ pub fn load_scene(
     let masked = scene.views.iter().all(|v| v.mask.is_some());
     if !no_mask && !masked {
         bail!(
-            "{}: IDR needs an object mask per view ({}); pass --no-mask to train without them (colour only on the whole image, a weaker surface)",
+            "{}: IDR needs an object mask per view ({}); pass --no-mask to train without them (colour on the whole image; with --renderer volume a field beyond the unit sphere takes the background)",
             path.display(),
             match format {
                 SceneFormat::Dtu => "a mask/ folder",
@@ -278,7 +278,6 @@ impl Variant for Idr {
             &task.scene,
             &views,
             code,
-            task.masked,
             &task.trace,
             device,
         )?;

@@ -415,7 +415,6 @@ impl Task for IdrTask {
             &self.scene,
             &self.eval_views,
             code,
-            self.masked,
             &self.trace,
             &device,
         )?;

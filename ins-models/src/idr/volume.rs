@@ -7,6 +7,7 @@
 //! forward-mode tangents, a colour and their backward.
 
 use burn::prelude::*;
+use ins_core::render::beyond_sphere::render_beyond_unit_sphere;
 use ins_core::render::gather::select_parallel;
 use ins_core::render::samplers::{draw_from_weights, stratified};
 use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
@@ -30,6 +31,13 @@ pub struct VolumeSampling {
     /// Sharpness of the coarse pass's density (NeuS up-samples at 64 and above): wide enough
     /// that a near miss still draws samples.
     pub coarse_sharpness: f32,
+    /// Samples per ray beyond the unit sphere, for a model with a background field.
+    #[serde(default = "default_beyond")]
+    pub beyond: usize,
+}
+
+fn default_beyond() -> usize {
+    VolumeSampling::default().beyond
 }
 
 impl Default for VolumeSampling {
@@ -39,13 +47,15 @@ impl Default for VolumeSampling {
             kept: 8,
             fine: 16,
             coarse_sharpness: 64.0,
+            beyond: 32,
         }
     }
 }
 
 /// A volume render of `R` rays under `S` styles, `N` samples a ray.
 pub struct VolumeRender {
-    /// Colour `[S·R, 3]` (style-major), the background behind what the ray leaves clear.
+    /// Colour `[S·R, 3]` (style-major), the background (the model's field beyond the unit
+    /// sphere, or a fixed colour) behind what the ray leaves clear.
     pub rgb: Tensor<2>,
     /// Opacity `[R]`: the silhouette.
     pub opacity: Tensor<1>,
@@ -80,6 +90,47 @@ fn unit_sphere_intervals(rays: &Rays) -> (Vec<f32>, Vec<f32>) {
                 .map_or((0.0, 0.0), |(t0, t1)| (t0.max(0.0), t1.max(0.0)))
         })
         .unzip()
+}
+
+/// What shows behind the SDF along each ray `[R, 3]`: the model's field beyond the unit sphere
+/// (sampled from where the ray leaves it, `far`, or for a ray that misses it from its closest
+/// approach to the centre), or `background` for a model without one.
+#[allow(clippy::too_many_arguments)]
+fn behind(
+    model: &IdrModel,
+    rays: &Rays,
+    origins: &Tensor<2>,
+    dirs: &Tensor<2>,
+    far: &[f32],
+    background: [f32; 3],
+    opts: &VolumeSampling,
+    seed: Option<u64>,
+    device: &Device,
+) -> Tensor<2> {
+    let r = rays.len();
+    let Some(field) = &model.background else {
+        return Tensor::<1>::from_floats(background, device)
+            .reshape([1, 3])
+            .expand([r, 3]);
+    };
+    let start: Vec<f32> = (0..r)
+        .map(|i| {
+            let (o, d) = (rays.origins[i], rays.directions[i]);
+            if far[i] > 0.0 {
+                far[i]
+            } else {
+                (-o.dot(d)).max(0.0)
+            }
+        })
+        .collect();
+    render_beyond_unit_sphere(
+        field,
+        origins.clone(),
+        dirs.clone(),
+        Tensor::from_floats(start.as_slice(), device),
+        opts.beyond,
+        seed.map(|s| s ^ 0xbac6),
+    )
 }
 
 /// Points `o + t·d` for `t [R, N]`: `[R·N, 3]`.
@@ -184,6 +235,9 @@ fn render_volume_with(
     let (coarse, f) = coarse_pass(model, &origins, &dirs, &near, &far, opts, seed);
     let z = fine_positions(coarse, f, near, far, opts, seed);
     let s = sharpness(model, opts, device);
+    let behind = behind(
+        model, rays, &origins, &dirs, &far_v, background, opts, seed, device,
+    );
     composite_samples(
         model,
         origins,
@@ -192,7 +246,7 @@ fn render_volume_with(
         &live,
         s,
         codes,
-        background,
+        behind,
         every_gradient,
     )
 }
@@ -229,14 +283,27 @@ pub fn render_volume_view(
 ) -> (Vec<f32>, Vec<f32>) {
     let styles = codes.as_ref().map_or(1, |c| c.dims()[0]);
     let r = rays.len();
-    let mut rgb: Vec<f32> = background
-        .iter()
-        .copied()
-        .cycle()
-        .take(styles * r * 3)
-        .collect();
-    let mut opacity = vec![0.0f32; r];
     let (near_v, far_v) = unit_sphere_intervals(rays);
+    let mut rgb: Vec<f32> = if model.background.is_some() {
+        let (origins, dirs) = ray_tensors(rays, device);
+        let beyond = host(behind(
+            model, rays, &origins, &dirs, &far_v, background, opts, None, device,
+        ));
+        beyond
+            .iter()
+            .copied()
+            .cycle()
+            .take(styles * r * 3)
+            .collect()
+    } else {
+        background
+            .iter()
+            .copied()
+            .cycle()
+            .take(styles * r * 3)
+            .collect()
+    };
+    let mut opacity = vec![0.0f32; r];
     let inside: Vec<usize> = (0..r).filter(|&i| far_v[i] > near_v[i]).collect();
     if inside.is_empty() {
         return (rgb, opacity);
@@ -377,7 +444,7 @@ fn shade_where_seen(
 
 /// The SDF (with its gradient at every sample when `every_gradient`) and the colour at samples
 /// `z [R, N]` (sorted along each ray; rays not `live` are clear), composited with NeuS's
-/// section opacities at sharpness `s`.
+/// section opacities at sharpness `s` in front of `behind [R, 3]`.
 #[allow(clippy::too_many_arguments)]
 fn composite_samples(
     model: &IdrModel,
@@ -387,7 +454,7 @@ fn composite_samples(
     live: &[bool],
     s: Tensor<1>,
     codes: Option<Tensor<2>>,
-    background: [f32; 3],
+    behind: Tensor<2>,
     every_gradient: bool,
 ) -> VolumeRender {
     let [r, n] = z.dims();
@@ -429,10 +496,11 @@ fn composite_samples(
     let shaded: Tensor<3> = (sections * w.reshape([1, r, n - 1, 1]).expand([styles, r, n - 1, 3]))
         .sum_dim(2)
         .reshape([styles, r, 3]);
-    let bg = Tensor::<1>::from_floats(background, &device).reshape([1, 1, 3]);
-    let clear = opacity.clone().neg().add_scalar(1.0).reshape([1, r, 1]);
-    let rgb = (shaded + clear.expand([styles, r, 3]) * bg.expand([styles, r, 3]))
-        .reshape([styles * r, 3]);
+    let clear = opacity.clone().neg().add_scalar(1.0).reshape([r, 1]);
+    let back = (clear.expand([r, 3]) * behind)
+        .reshape([1, r, 3])
+        .expand([styles, r, 3]);
+    let rgb = (shaded + back).reshape([styles * r, 3]);
     let live = live_rays.reshape([r, 1]).expand([r, n]).reshape([r * n]);
     VolumeRender {
         rgb,
@@ -452,55 +520,64 @@ mod tests {
     use crate::idr::model::{IdrArch, SdfKind, SdfRenderer};
 
     /// A view rendered with the fine pass near the surface only equals the full render: the
-    /// rays it leaves clear were clear, and it does leave some.
+    /// rays it leaves clear were clear, and it does leave some. With a background field, the
+    /// rays it leaves clear show the field's colour as the full render does.
     #[test]
     fn a_view_rendered_near_the_surface_only_equals_the_full_render() {
-        let device = Device::flex();
-        device.seed(5);
-        let arch = IdrArch {
-            sdf: SdfKind::Grid,
-            radius: 0.5,
-            grid_max_resolution: 64,
-            color_width: 16,
-            color_grid: 0,
-            renderer: SdfRenderer::Volume,
-        };
-        // The fresh model's sphere of radius 0.5, at a trained model's sharpness (s ≈ 200; at
-        // the starting 20 the margin is 0.5 and no ray inside the unit sphere is that clear).
-        let mut model = IdrModel::new(&arch, &device);
-        model.sharpness = Some(ins_core::render::sdf_volume::Sharpness::new(0.53, &device));
-        let mut rays = Rays::default();
-        for i in 0..13 {
-            for j in 0..13 {
-                let (x, y) = (-1.2 + 0.2 * i as f32, -1.2 + 0.2 * j as f32);
-                rays.push(Vec3::new(x, y, 2.0), Vec3::NEG_Z, 0.0, 4.0);
+        for background_field in [false, true] {
+            let device = Device::flex();
+            device.seed(5);
+            let arch = IdrArch {
+                sdf: SdfKind::Grid,
+                radius: 0.5,
+                grid_max_resolution: 64,
+                color_width: 16,
+                color_grid: 0,
+                renderer: SdfRenderer::Volume,
+                background: background_field,
+            };
+            // The fresh model's sphere of radius 0.5, at a trained model's sharpness (s ≈ 200;
+            // at the starting 20 the margin is 0.5 and no ray inside the unit sphere is clear).
+            let mut model = IdrModel::new(&arch, &device);
+            model.sharpness = Some(ins_core::render::sdf_volume::Sharpness::new(0.53, &device));
+            let mut rays = Rays::default();
+            for i in 0..13 {
+                for j in 0..13 {
+                    let (x, y) = (-1.2 + 0.2 * i as f32, -1.2 + 0.2 * j as f32);
+                    rays.push(Vec3::new(x, y, 2.0), Vec3::NEG_Z, 0.0, 4.0);
+                }
             }
+            let background = [0.2, 0.3, 0.4];
+            let opts = VolumeSampling::default();
+            let full = render_volume(&model, &rays, None, background, &opts, None, &device);
+            let values = |t: Tensor<2>| t.into_data().convert::<f32>().try_to_vec::<f32>().unwrap();
+            let (full_rgb, full_opacity) = (
+                values(full.rgb),
+                values(full.opacity.reshape([rays.len(), 1])),
+            );
+            let (rgb, opacity) =
+                render_volume_view(&model, &rays, None, background, &opts, &device);
+            let worst = |a: &[f32], b: &[f32]| {
+                a.iter()
+                    .zip(b)
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0f32, f32::max)
+            };
+            assert!(worst(&opacity, &full_opacity) < 1e-3);
+            assert!(worst(&rgb, &full_rgb) < 1e-3, "field {background_field}");
+            let hits = full_opacity.iter().filter(|&&o| o > 0.5).count();
+            let left_clear = (0..rays.len())
+                .filter(|&i| opacity[i] == 0.0 && full_opacity[i] > 0.0)
+                .count();
+            assert!(hits > 10, "{hits} rays meet the sphere");
+            assert!(
+                left_clear > 10,
+                "{left_clear} rays inside the unit sphere were skipped"
+            );
+            // The field, not the fixed colour, shows where the ray is clear.
+            let clear = (0..rays.len()).find(|&i| full_opacity[i] < 1e-3).unwrap();
+            let shows_fixed = (0..3).all(|c| (rgb[clear * 3 + c] - background[c]).abs() < 1e-4);
+            assert_eq!(shows_fixed, !background_field);
         }
-        let background = [0.2, 0.3, 0.4];
-        let opts = VolumeSampling::default();
-        let full = render_volume(&model, &rays, None, background, &opts, None, &device);
-        let values = |t: Tensor<2>| t.into_data().convert::<f32>().try_to_vec::<f32>().unwrap();
-        let (full_rgb, full_opacity) = (
-            values(full.rgb),
-            values(full.opacity.reshape([rays.len(), 1])),
-        );
-        let (rgb, opacity) = render_volume_view(&model, &rays, None, background, &opts, &device);
-        let worst = |a: &[f32], b: &[f32]| {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| (x - y).abs())
-                .fold(0.0f32, f32::max)
-        };
-        assert!(worst(&opacity, &full_opacity) < 1e-3);
-        assert!(worst(&rgb, &full_rgb) < 1e-3);
-        let hits = full_opacity.iter().filter(|&&o| o > 0.5).count();
-        let left_clear = (0..rays.len())
-            .filter(|&i| opacity[i] == 0.0 && full_opacity[i] > 0.0)
-            .count();
-        assert!(hits > 10, "{hits} rays meet the sphere");
-        assert!(
-            left_clear > 10,
-            "{left_clear} rays inside the unit sphere were skipped"
-        );
     }
 }

@@ -56,6 +56,39 @@ pub struct Object {
     pub foreground: bool,
 }
 
+impl Object {
+    /// The object scaled by `k` about the origin (its texture's cells with it).
+    pub fn scaled(self, k: f32) -> Self {
+        let shape = match self.shape {
+            Shape::Sphere { center, radius } => Shape::Sphere {
+                center: center * k,
+                radius: radius * k,
+            },
+            Shape::Box { min, max } => Shape::Box {
+                min: min * k,
+                max: max * k,
+            },
+            Shape::Plane { point, normal } => Shape::Plane {
+                point: point * k,
+                normal,
+            },
+        };
+        let texture = match self.texture {
+            Texture::Checker { a, b, size } => Texture::Checker {
+                a,
+                b,
+                size: size * k,
+            },
+            solid => solid,
+        };
+        Self {
+            shape,
+            texture,
+            ..self
+        }
+    }
+}
+
 /// A set of objects placed in the world by a similarity.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AnalyticScene {
@@ -264,23 +297,11 @@ impl AnalyticScene {
         }
     }
 
-    /// The tabletop in a room: its objects on a floor of large tiles, inside a dome of radius 9
-    /// painted in broad checks: a background well past cameras 3 units away, as a capture of
-    /// an object in a room has, coarse enough to be learnt from small images.
-    pub fn room() -> Self {
+    /// The tabletop's objects at `scale`, inside a dome of radius 9 painted in broad checks,
+    /// with no floor.
+    fn in_dome(scale: f32) -> Self {
         let mut scene = Self::tabletop(false);
-        scene.objects.push(Object {
-            shape: Shape::Plane {
-                point: Vec3::new(0.0, 0.0, -0.55),
-                normal: Vec3::Z,
-            },
-            texture: Texture::Checker {
-                a: Vec3::new(0.35, 0.3, 0.25),
-                b: Vec3::new(0.65, 0.6, 0.5),
-                size: 1.2,
-            },
-            foreground: false,
-        });
+        scene.objects = scene.objects.into_iter().map(|o| o.scaled(scale)).collect();
         scene.objects.push(Object {
             shape: Shape::Sphere {
                 center: Vec3::ZERO,
@@ -293,6 +314,38 @@ impl AnalyticScene {
             },
             foreground: false,
         });
+        scene
+    }
+
+    /// The tabletop's objects at 0.7 times their size, within radius 0.67 of the centre (as
+    /// DTU's unit sphere leaves a margin around its object), inside a dome of radius 9 painted
+    /// in broad checks, with no floor: everything behind them lies beyond the unit sphere, as
+    /// NeRF++'s background model assumes, and the masks (written, but a run without masks
+    /// leaves them unused) score the objects alone.
+    pub fn domed() -> Self {
+        Self::in_dome(0.7)
+    }
+
+    /// The tabletop in a room: its objects on a floor of large tiles, inside a dome of radius
+    /// 9 painted in broad checks: a background well past cameras 3 units away, as a capture of
+    /// an object in a room has, coarse enough to be learnt from small images.
+    pub fn room() -> Self {
+        let mut scene = Self::in_dome(1.0);
+        scene.objects.insert(
+            scene.objects.len() - 1,
+            Object {
+                shape: Shape::Plane {
+                    point: Vec3::new(0.0, 0.0, -0.55),
+                    normal: Vec3::Z,
+                },
+                texture: Texture::Checker {
+                    a: Vec3::new(0.35, 0.3, 0.25),
+                    b: Vec3::new(0.65, 0.6, 0.5),
+                    size: 1.2,
+                },
+                foreground: false,
+            },
+        );
         scene
     }
 
