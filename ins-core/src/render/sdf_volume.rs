@@ -26,9 +26,11 @@ impl Sharpness {
         }
     }
 
-    /// `s`, `[1]`, clamped to `[1, 1e6]` in the exponent's range.
+    /// `s`, `[1]`, at most 1e6 (clamped in the exponent's range). No floor: a clamp there
+    /// stops the gradient, and a sharpness that fell to it early (scan37 through SfM without
+    /// masks, the starting sphere mostly over the table, fell to 1 by step 100) never rose again.
     pub fn s(&self) -> Tensor<1> {
-        self.variance.val().mul_scalar(10.0).clamp(0.0, 13.8).exp()
+        self.variance.val().mul_scalar(10.0).clamp_max(13.8).exp()
     }
 
     /// `s` on the host (sampling, logs).
@@ -138,5 +140,16 @@ mod tests {
             .unwrap()
             .into_scalar::<f32>();
         assert!((g - 200.9).abs() < 0.5, "ds/dvariance {g}");
+        // Below 1 too: no floor that would stop the gradient.
+        let low = Sharpness::new(-0.1, &ad);
+        assert!((low.value() - 0.3679).abs() < 1e-3);
+        let grads = low.s().sum().backward();
+        let g = low
+            .variance
+            .val()
+            .grad(&grads)
+            .unwrap()
+            .into_scalar::<f32>();
+        assert!((g - 3.679).abs() < 0.01, "ds/dvariance {g} below s = 1");
     }
 }

@@ -241,6 +241,10 @@ impl Variant for Idr {
                     // The sharpness belongs to the surface: it stays as pretrained.
                     phase = phase.freeze("sharpness");
                 }
+                if cfg.arch().background {
+                    // What lies beyond the sphere is the photos', not the painting's.
+                    phase = phase.freeze("background");
+                }
                 if cfg.sdf_lr_ratio > 0.0 {
                     phase.lr_mult("sdf", cfg.sdf_lr_ratio)
                 } else {

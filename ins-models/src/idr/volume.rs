@@ -133,6 +133,25 @@ fn behind(
     )
 }
 
+/// The colour `[R, 3]` of the model's field beyond the unit sphere along `rays` (samples at
+/// bin centres), or `None` for a model without one.
+pub fn background_colours(model: &IdrModel, rays: &Rays, device: &Device) -> Option<Tensor<2>> {
+    model.background.as_ref()?;
+    let (_, far) = unit_sphere_intervals(rays);
+    let (origins, dirs) = ray_tensors(rays, device);
+    Some(behind(
+        model,
+        rays,
+        &origins,
+        &dirs,
+        &far,
+        [0.0; 3],
+        &VolumeSampling::default(),
+        None,
+        device,
+    ))
+}
+
 /// Points `o + t·d` for `t [R, N]`: `[R·N, 3]`.
 fn points(origins: Tensor<2>, dirs: Tensor<2>, t: Tensor<2>) -> Tensor<2> {
     let [r, n] = t.dims();
