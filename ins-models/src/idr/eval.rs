@@ -15,7 +15,8 @@ use ins_scene::rays::{Rays, camera_rays};
 
 use super::model::IdrModel;
 use super::render::render_surface;
-use super::volume::{VolumeSampling, render_volume_view};
+use super::volume::VolumeSampling;
+use super::volume_view::render_volume_view;
 
 /// Rays per chunk when rendering whole images.
 pub const CHUNK: usize = 16384;

@@ -5,7 +5,8 @@
 //!
 //! - [`model`]: SDF network (IDR MLP or hash grid), rendering network, SIM and AM.
 //! - [`render`]: sphere tracing and IDR's differentiable surface point.
-//! - [`volume`]: the SDF rendered as a volume (NeuS), the other way to pretrain.
+//! - [`volume`]: the SDF rendered as a volume (NeuS), the other way to pretrain;
+//!   [`volume_view`]: whole views rendered that way, the clear rays skipped.
 //! - [`task`]: the losses; [`run`]: pretraining, stylizing, loading runs.
 //! - [`eval`]: silhouette IoU and PSNR inside the mask; [`mesh`]: marching-cubes export.
 //! - [`scene_render`]: an IDR run as the shared 3D interface (frames, meshes).
@@ -19,6 +20,7 @@ pub mod run;
 pub mod scene_render;
 pub mod task;
 pub mod volume;
+pub mod volume_view;
 
 pub use config::IdrRunConfig;
 pub use model::IdrModel;
