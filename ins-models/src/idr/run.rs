@@ -45,9 +45,9 @@ const CURVATURE_POINTS: usize = 2048;
 
 /// Loads a scene for surface reconstruction, in the unit-sphere frame IDR works in: DTU ships
 /// it; an object captured from around it (COLMAP, transforms.json, NeRF-synthetic) is placed
-/// there from its masks' visual hull (`ins_scene::data::unit_sphere`), or from its cameras
-/// alone with `no_mask`. Masks must exist unless `no_mask`, and every `holdout`-th view goes
-/// to val (0: the format's own hold-out).
+/// there from its masks' visual hull (`ins_scene::data::unit_sphere`), or with `no_mask` from
+/// its sparse points (else its cameras), said in a note. Masks must exist unless `no_mask`,
+/// and every `holdout`-th view goes to val (0: the format's own hold-out).
 pub fn load_scene(
     path: &Path,
     downscale: u32,
@@ -80,7 +80,12 @@ pub fn load_scene(
     let mut scene = if format == SceneFormat::Dtu {
         scene
     } else {
-        ins_scene::data::unit_sphere::into_unit_sphere(scene, !no_mask)?.0
+        let known = scene.notes.len();
+        let scene = ins_scene::data::unit_sphere::into_unit_sphere(scene, !no_mask)?.0;
+        for note in &scene.notes[known..] {
+            eprintln!("note: {note}");
+        }
+        scene
     };
     if holdout > 0 {
         let all: Vec<usize> = (0..scene.views.len()).collect();

@@ -156,6 +156,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         white_background: true,
         forward_facing: false,
         contraction: None,
+        points: Vec::new(),
         notes: Vec::new(),
     })
 }

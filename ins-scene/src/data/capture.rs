@@ -215,6 +215,11 @@ pub fn build(
         white_background: false,
         forward_facing: framing.forward_facing,
         contraction: framing.contraction,
+        points: sparse
+            .points
+            .iter()
+            .map(|p| framing.to_scene.apply_point(p.as_vec3()))
+            .collect(),
         notes,
     })
 }

@@ -303,6 +303,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         white_background: false,
         forward_facing: false,
         contraction: None,
+        points: Vec::new(),
         notes: Vec::new(),
     })
 }

@@ -146,6 +146,7 @@ pub fn load(dir: &Path, opts: &LoadOptions) -> Result<Scene, DataError> {
         white_background: false,
         forward_facing: true,
         contraction: None,
+        points: Vec::new(),
         notes: Vec::new(),
     })
 }

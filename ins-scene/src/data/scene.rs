@@ -188,6 +188,9 @@ pub struct Scene {
     /// Unbounded captures (a subject in a room or a street): space beyond [`Scene::bounds`]
     /// is contracted into a cube the field covers, and rays run out to [`Scene::far`].
     pub contraction: Option<Contraction>,
+    /// The capture's sparse points (SfM's, or a transforms.json's point cloud) in the scene
+    /// frame; empty for formats that have none (DTU, Blender, LLFF).
+    pub points: Vec<Vec3>,
     /// What a user should know about how the folder was read, one sentence each (photos a
     /// `transforms.json` names that are not there): printed by `data check` and by training.
     pub notes: Vec<String>,

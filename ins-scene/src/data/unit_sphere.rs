@@ -5,8 +5,9 @@
 //! DTU ships that placement; a capture of one's own (COLMAP, transforms.json, NeRF-synthetic)
 //! does not. With object masks it is found from the masks themselves: the visual hull (the
 //! points every view's mask holds) bounds the object, and its bounding sphere, with a margin,
-//! becomes the unit sphere. Without masks the sphere is centred on the point the cameras look at
-//! and sized as DTU's, the cameras [`UNMASKED_CAMERA_DISTANCE`] radii away.
+//! becomes the unit sphere. Without masks the sphere holds the sparse points (SfM's) that
+//! nearly every view keeps in frame; with no points it is centred on the point the cameras
+//! look at and sized as DTU's, the cameras [`UNMASKED_CAMERA_DISTANCE`] radii away.
 
 use rayon::prelude::*;
 
@@ -30,15 +31,40 @@ pub const SPHERE_MARGIN: f32 = 1.15;
 /// 49 cameras sit 2.51–2.95 radii from its sphere's centre, 2.82 on average).
 pub const UNMASKED_CAMERA_DISTANCE: f32 = 2.8;
 
+/// Without masks, the share of the sparse points (of those nearly every view keeps in frame)
+/// that the sphere holds before its margin: the rest are stray matches, and whatever lies
+/// beyond is the field beyond the sphere's.
+pub const POINT_COVERAGE: f32 = 0.99;
+/// Without masks, the share of the views that must keep a sparse point in frame for it to
+/// count as the object's: what every photo is of, not the floor or walls around it, which
+/// only the views facing them see.
+pub const POINT_MIN_SEEN: f32 = 0.9;
+/// Fewest sparse points in frame for them to size the sphere.
+pub const MIN_POINTS: usize = 50;
+/// Without masks, the nearest camera stays at least this many radii from the centre, however
+/// far the points reach: surface methods need the cameras well outside the sphere.
+pub const MIN_CAMERA_DISTANCE: f32 = 1.5;
+
+/// What placed the unit sphere.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SphereSource {
+    /// The masks' visual hull.
+    Masks,
+    /// This many sparse points that most views keep in frame.
+    Points(usize),
+    /// The cameras alone.
+    Cameras,
+}
+
 /// Where the object was found, in the scene's frame before the move.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ObjectSphere {
     /// Centre of the sphere that becomes the unit sphere.
     pub center: Vec3,
-    /// Its radius (the hull's bounding radius times [`SPHERE_MARGIN`]).
+    /// Its radius (the hull's or the points' bounding radius times [`SPHERE_MARGIN`]).
     pub radius: f32,
-    /// Whether it came from the masks' visual hull (else from the cameras alone).
-    pub from_masks: bool,
+    /// What placed it.
+    pub source: SphereSource,
 }
 
 /// The object's sphere from the views' masks: the visual hull found on a coarse grid over
@@ -85,7 +111,7 @@ pub fn visual_hull_sphere(views: &[View]) -> Result<ObjectSphere, String> {
     Ok(ObjectSphere {
         center,
         radius: reach * SPHERE_MARGIN,
-        from_masks: true,
+        source: SphereSource::Masks,
     })
 }
 
@@ -129,8 +155,57 @@ pub fn camera_sphere(views: &[View]) -> ObjectSphere {
     ObjectSphere {
         center: Vec3::ZERO,
         radius: mean / UNMASKED_CAMERA_DISTANCE,
-        from_masks: false,
+        source: SphereSource::Cameras,
     }
+}
+
+/// The object's sphere from a capture's sparse points, without masks: the points that at
+/// least [`POINT_MIN_SEEN`] of the views keep in frame (what a capture is of) are the object;
+/// the sphere is centred on their box (between the 1st and 99th percentile on each axis, so
+/// stray matches do not move it) and holds [`POINT_COVERAGE`] of them, with the margin, the
+/// nearest camera at least [`MIN_CAMERA_DISTANCE`] radii away. `None` with fewer than
+/// [`MIN_POINTS`] such points. Where the cameras look is not where the object is: scan37's
+/// photos through SfM have their axes meet 0.6 sphere radii in front of its bricks' centre, and
+/// a sphere centred there and sized by the cameras' distance cut the back brick off.
+pub fn point_sphere(views: &[View], points: &[Vec3]) -> Option<ObjectSphere> {
+    let min_seen = ((views.len() as f32 * POINT_MIN_SEEN).ceil() as usize).max(1);
+    let object: Vec<Vec3> = points
+        .par_iter()
+        .filter(|p| {
+            let seen = views
+                .iter()
+                .filter(|v| v.camera.project(**p).is_some_and(|q| v.camera.in_frame(q)))
+                .count();
+            seen >= min_seen
+        })
+        .copied()
+        .collect();
+    if object.len() < MIN_POINTS {
+        return None;
+    }
+    let percentile = |mut v: Vec<f32>, q: f32| -> f32 {
+        v.sort_by(f32::total_cmp);
+        let k = ((v.len() as f32 * q).ceil() as usize).clamp(1, v.len());
+        v[k - 1]
+    };
+    let axis = |i: usize| -> f32 {
+        let v: Vec<f32> = object.iter().map(|p| p[i]).collect();
+        0.5 * (percentile(v.clone(), 0.01) + percentile(v, 0.99))
+    };
+    let center = Vec3::new(axis(0), axis(1), axis(2));
+    let reach = percentile(
+        object.iter().map(|p| (*p - center).length()).collect(),
+        POINT_COVERAGE,
+    );
+    let nearest = views
+        .iter()
+        .map(|v| (v.camera.origin() - center).length())
+        .fold(f32::INFINITY, f32::min);
+    Some(ObjectSphere {
+        center,
+        radius: (reach * SPHERE_MARGIN).min(nearest / MIN_CAMERA_DISTANCE),
+        source: SphereSource::Points(object.len()),
+    })
 }
 
 /// `scene` moved so that `sphere` becomes the unit sphere at the origin: cameras, the map from
@@ -142,6 +217,9 @@ pub fn reframe(mut scene: Scene, sphere: ObjectSphere) -> Scene {
         rotation: Mat3::IDENTITY,
         translation: -s * sphere.center,
     };
+    for p in &mut scene.points {
+        *p = to_unit.apply_point(*p);
+    }
     for v in &mut scene.views {
         let c = &mut v.camera.c2w;
         let o = to_unit.apply_point(Vec3::new(c[0][3], c[1][3], c[2][3]));
@@ -173,7 +251,9 @@ pub fn reframe(mut scene: Scene, sphere: ObjectSphere) -> Scene {
 }
 
 /// `scene` (an object captured from around it) in the unit-sphere frame: from its masks'
-/// visual hull where every view has a mask and `use_masks`, else from its cameras alone.
+/// visual hull where every view has a mask and `use_masks`, else from its sparse points
+/// ([`point_sphere`]) where it has enough, else from its cameras alone. A note on the scene
+/// says which.
 /// A forward-facing capture has no object to surround, and a sphere that would hold a camera
 /// cannot be used: both are errors naming the scene.
 pub fn into_unit_sphere(scene: Scene, use_masks: bool) -> Result<(Scene, ObjectSphere), DataError> {
@@ -194,7 +274,7 @@ pub fn into_unit_sphere(scene: Scene, use_masks: bool) -> Result<(Scene, ObjectS
             )
         })?
     } else {
-        camera_sphere(&scene.views)
+        point_sphere(&scene.views, &scene.points).unwrap_or_else(|| camera_sphere(&scene.views))
     };
     let inside = scene
         .views
@@ -212,5 +292,109 @@ pub fn into_unit_sphere(scene: Scene, use_masks: bool) -> Result<(Scene, ObjectS
             ),
         ));
     }
-    Ok((reframe(scene, sphere), sphere))
+    let mut scene = reframe(scene, sphere);
+    scene.notes.push(match sphere.source {
+        SphereSource::Masks => {
+            "the object's unit sphere is its masks' visual hull, with a margin".into()
+        }
+        SphereSource::Points(n) => format!(
+            "without masks, the object's unit sphere holds the {n} sparse points nearly every \
+             view keeps in frame (the nearest camera {:.2} radii away)",
+            nearest_camera(&scene)
+        ),
+        SphereSource::Cameras => format!(
+            "without masks or sparse points, the object's unit sphere is centred where the \
+             cameras look, {UNMASKED_CAMERA_DISTANCE} radii from them on average"
+        ),
+    });
+    Ok((scene, sphere))
+}
+
+/// The nearest camera's distance from the origin.
+fn nearest_camera(scene: &Scene) -> f32 {
+    scene
+        .views
+        .iter()
+        .map(|v| v.camera.origin().length())
+        .fold(f32::INFINITY, f32::min)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use crate::data::images::Image;
+
+    /// Twelve views in a ring of radius 3 (up +z, a little above the middle), looking at the
+    /// origin with a 90° field of view.
+    fn ring() -> Vec<View> {
+        (0..12)
+            .map(|i| {
+                let a = i as f32 / 12.0 * std::f32::consts::TAU;
+                let eye = Vec3::new(3.0 * a.cos(), 3.0 * a.sin(), 0.8);
+                View {
+                    camera: Camera::look_at(64, 48, 32.0, eye, Vec3::ZERO, Vec3::Z),
+                    image: Image {
+                        width: 64,
+                        height: 48,
+                        data: vec![0; 64 * 48 * 3],
+                    },
+                    mask: None,
+                    path: format!("{i}.png").into(),
+                    mask_path: None,
+                    depth_range: None,
+                }
+            })
+            .collect()
+    }
+
+    /// Points on a sphere of `radius` about the origin (a Fibonacci spiral).
+    fn shell(radius: f32, n: usize) -> Vec<Vec3> {
+        (0..n)
+            .map(|i| {
+                let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let a = i as f32 * 2.399_963;
+                let r = (1.0 - z * z).sqrt();
+                radius * Vec3::new(r * a.cos(), r * a.sin(), z)
+            })
+            .collect()
+    }
+
+    /// An object wider than a sphere sized by the cameras' distance alone, and not where
+    /// their axes meet (as scan37's bricks through SfM): the points' sphere is centred on it
+    /// and holds it, stray far points do not widen it, and points reaching towards the
+    /// cameras leave the nearest one its distance.
+    #[test]
+    fn sparse_points_place_the_sphere_the_cameras_alone_would_cut() {
+        let views = ring();
+        let offset = Vec3::new(0.3, -0.2, 0.1);
+        let by_cameras = camera_sphere(&views);
+        assert!(by_cameras.radius < 1.3, "{}", by_cameras.radius);
+        let mut points: Vec<Vec3> = shell(1.3, 600).into_iter().map(|p| p + offset).collect();
+        points.extend([Vec3::new(1.9, 0.0, 0.0), Vec3::new(0.0, -1.9, 0.1)]);
+        let s = point_sphere(&views, &points).unwrap();
+        let SphereSource::Points(n) = s.source else {
+            panic!("{:?}", s.source)
+        };
+        assert!(n > 500, "{n} points in frame");
+        assert!((s.center - offset).length() < 0.05, "centre {:?}", s.center);
+        assert!(
+            s.radius >= 1.3 && s.radius <= 1.3 * SPHERE_MARGIN * 1.02,
+            "radius {}",
+            s.radius
+        );
+        // Points every view sees reaching out towards the cameras (a tall pole through the
+        // object): the sphere stops short of the cameras.
+        let pole: Vec<Vec3> = (0..=100)
+            .map(|i| Vec3::new(0.0, 0.0, -1.9 + 3.8 * i as f32 / 100.0))
+            .collect();
+        let s = point_sphere(&views, &pole).unwrap();
+        let nearest = views
+            .iter()
+            .map(|v| (v.camera.origin() - s.center).length())
+            .fold(f32::INFINITY, f32::min);
+        assert!((s.radius - nearest / MIN_CAMERA_DISTANCE).abs() < 1e-4);
+        // Too few points in frame to tell: none.
+        assert!(point_sphere(&views, &shell(1.0, MIN_POINTS - 1)).is_none());
+    }
 }

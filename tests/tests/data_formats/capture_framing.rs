@@ -146,8 +146,10 @@ fn object_points(scene: &Scene, synth: &SynthScene) -> Vec<Vec3> {
 }
 
 #[test]
-fn masked_captures_are_placed_in_the_unit_sphere_from_their_visual_hull() {
-    use ins_scene::data::unit_sphere::{SPHERE_MARGIN, UNMASKED_CAMERA_DISTANCE, into_unit_sphere};
+fn captures_are_placed_in_the_unit_sphere_from_their_masks_points_or_cameras() {
+    use ins_scene::data::unit_sphere::{
+        MIN_POINTS, SPHERE_MARGIN, SphereSource, UNMASKED_CAMERA_DISTANCE, into_unit_sphere,
+    };
     for (format, enc) in [
         (SceneFormat::Colmap, Encoding::Binary),
         (SceneFormat::Transforms, Encoding::Binary),
@@ -159,7 +161,7 @@ fn masked_captures_are_placed_in_the_unit_sphere_from_their_visual_hull() {
             "{format}: masks read"
         );
         let (unit, sphere) = into_unit_sphere(scene.clone(), true).unwrap();
-        assert!(sphere.from_masks);
+        assert_eq!(sphere.source, SphereSource::Masks);
         // The rays are the generating cameras' in the new frame too.
         assert_rays_equal_generating_cameras(&unit, &synth);
         // Every point of the objects lies inside the unit sphere, and the sphere is tight:
@@ -175,9 +177,27 @@ fn masked_captures_are_placed_in_the_unit_sphere_from_their_visual_hull() {
         assert!(unit.views.iter().all(|v| v.camera.origin().length() > 1.0));
         assert!(unit.per_ray_range && unit.contraction.is_none());
         assert!(matches!(unit.bounds, Bounds::Sphere { radius, .. } if radius == 1.0));
-        // Without masks: centred where the cameras look, the cameras DTU's distance away.
-        let (bare, sphere) = into_unit_sphere(scene, false).unwrap();
-        assert!(!sphere.from_masks);
+        // Without masks: centred where the cameras look, holding the sparse points.
+        let (bare, sphere) = into_unit_sphere(scene.clone(), false).unwrap();
+        assert!(
+            matches!(sphere.source, SphereSource::Points(n) if n >= MIN_POINTS),
+            "{format}: {:?}",
+            sphere.source
+        );
+        assert!(bare.notes.iter().any(|n| n.contains("sparse points")));
+        let reach = object_points(&bare, &synth)
+            .iter()
+            .map(|p| p.length())
+            .fold(0.0f32, f32::max);
+        assert!(
+            reach < 1.0 && reach > 0.6 / SPHERE_MARGIN,
+            "{format} without masks: objects reach {reach}"
+        );
+        // Without points either: the cameras DTU's distance away.
+        let mut pointless = scene;
+        pointless.points.clear();
+        let (bare, sphere) = into_unit_sphere(pointless, false).unwrap();
+        assert_eq!(sphere.source, SphereSource::Cameras);
         let mean = bare
             .views
             .iter()
