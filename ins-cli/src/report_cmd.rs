@@ -119,7 +119,7 @@ fn fmt(v: &Value) -> String {
 }
 
 /// The last metrics line of a run that has `key`.
-fn last_with(run: &Path, key: &str) -> Option<Value> {
+pub(crate) fn last_with(run: &Path, key: &str) -> Option<Value> {
     let text = std::fs::read_to_string(run.join("metrics.jsonl")).ok()?;
     text.lines()
         .rev()

@@ -35,10 +35,26 @@ use crate::common::{DeviceArgs, RunArgs, TrainCommand, VggArgs};
 use crate::stages::{Fingerprint, Manifest, StageCounter, StageStart, describe, minutes};
 use crate::stylize_inputs::{MIN_PHOTOS, Photos, check_free_space, scene_files, what_photos};
 
-/// How much slower a stylizing step is than a pretraining step of the same scene (a VGG-16
-/// pass forward and back per patch): lego at 200² on 2 cores, 0.46 s against 1.1 s a step
-/// (docs/results.md). Only for the estimate of what is left.
+/// How much slower a stylizing step is than a pretraining step of the same scene, where the
+/// pretrained run does not say how many rays its steps took (and for surfaces): lego at 200²
+/// on 2 cores, 0.46 s against 1.1 s a step (docs/results.md). Only for the estimate of what
+/// is left.
 const STYLIZE_STEP_COST: f64 = 2.4;
+/// A NeRF stylizing step's VGG-16 pass, forward and back, in pretraining steps: with the
+/// default 64² patch shaded as `64² / rays` pretraining batches, this gives lego's 2.4 (about
+/// 6,000 rays a step) and a synthetic room capture's 8.7 (576 rays a step, 223 samples
+/// each: 5.5 s against 0.63 s a step, docs/measurements.md).
+const STYLIZE_VGG_COST: f64 = 1.7;
+
+/// [`STYLIZE_STEP_COST`], or for NeRF the pretrained run's own: its patch of 64² rays against
+/// the rays of its pretraining steps (the samples a ray are the scene's either way).
+fn stylize_step_cost(pretrained: &Path, surface: bool) -> f64 {
+    let rays = crate::report_cmd::last_with(pretrained, "rays").and_then(|v| v["rays"].as_f64());
+    match rays {
+        Some(rays) if !surface && rays > 0.0 => 64.0 * 64.0 / rays + STYLIZE_VGG_COST,
+        _ => STYLIZE_STEP_COST,
+    }
+}
 
 #[derive(Args, Debug)]
 pub struct Stylize {
@@ -348,8 +364,8 @@ pub fn run(a: Stylize) -> Result<()> {
             manifest.finish("pretrain", seconds)?;
         }
         let stylize_steps = a.steps(a.stylize_steps, if a.surface { 400 } else { 600 });
-        let estimate =
-            pretrain_seconds_per_step.map(|s| s * stylize_steps as f64 * STYLIZE_STEP_COST);
+        let cost = stylize_step_cost(&pretrained, a.surface);
+        let estimate = pretrain_seconds_per_step.map(|s| s * stylize_steps as f64 * cost);
         counter.end("pretrain", &manifest, estimate);
     }
 
