@@ -45,6 +45,11 @@ const STYLIZE_STEP_COST: f64 = 2.4;
 /// 6,000 rays a step) and a synthetic room capture's 8.7 (576 rays a step, 223 samples
 /// each: 5.5 s against 0.63 s a step, docs/measurements.md).
 const STYLIZE_VGG_COST: f64 = 1.7;
+/// Fewest pretraining steps of a `--quick` preview: a room capture of 50 photos at 200×150
+/// pretrained for a quarter of its 1000 steps stayed fog (17.21 dB held out, the objects
+/// gone: a preview that shows nothing to stylize); for 500, 22.58 dB with the objects clear
+/// (docs/measurements.md). fern's quarter is 500 already.
+const QUICK_MIN_PRETRAIN_STEPS: usize = 500;
 
 /// [`STYLIZE_STEP_COST`], or for NeRF the pretrained run's own: its patch of 64² rays against
 /// the rays of its pretraining steps (the samples a ray are the scene's either way).
@@ -72,11 +77,12 @@ pub struct Stylize {
     /// Reconstruct a surface (IDR) instead of a radiance field: the photos need object masks.
     #[arg(long)]
     surface: bool,
-    /// A preview, to choose a painting: a quarter of the steps, images half as large, half the
-    /// frames and smaller, in about a quarter of the time.
+    /// A preview, to choose a painting: a quarter of the steps (pretraining at least 500),
+    /// images half as large, half the frames and smaller.
     #[arg(long)]
     quick: bool,
-    /// Pretraining steps (default: the variant's for the scene; --quick: a quarter).
+    /// Pretraining steps (default: the variant's for the scene; --quick: a quarter, at least
+    /// 500).
     #[arg(long)]
     pretrain_steps: Option<usize>,
     /// Stylization steps (default: the variant's; --quick: a quarter).
@@ -157,6 +163,17 @@ impl Stylize {
         })
     }
 
+    /// Pretraining's [`Self::steps`], never fewer than [`QUICK_MIN_PRETRAIN_STEPS`] unless
+    /// asked for.
+    fn pretrain_steps(&self, steps: Option<usize>, default: usize) -> usize {
+        match steps {
+            Some(s) => s,
+            None => self
+                .steps(None, default)
+                .max(QUICK_MIN_PRETRAIN_STEPS.min(default)),
+        }
+    }
+
     /// Trains `cfg` into `out` as `ins-cli train` does (resuming where `resume` says); its steps.
     fn train_stage(
         &self,
@@ -235,7 +252,7 @@ pub fn run(a: Stylize) -> Result<()> {
         painting_names.join(", "),
         a.out.display(),
         if a.quick {
-            " (a quick preview: a quarter of the steps, images half as large)"
+            " (a quick preview: a quarter of the steps, pretraining at least 500, images half as large)"
         } else {
             ""
         }
@@ -343,7 +360,8 @@ pub fn run(a: Stylize) -> Result<()> {
                 let mut cfg = IdrRunConfig::default();
                 cfg.source.scene = Some(scene_dir.clone());
                 cfg.source.downscale = downscale;
-                cfg.schedule.steps = a.steps(a.pretrain_steps, cfg.steps_for(RunKind::Pretrain));
+                cfg.schedule.steps =
+                    a.pretrain_steps(a.pretrain_steps, cfg.steps_for(RunKind::Pretrain));
                 a.train_stage(&pretrained, resume, AnyConfig::Idr(&cfg), &what, next)?
             } else {
                 let mut cfg = NerfRunConfig::default();
@@ -353,7 +371,7 @@ pub fn run(a: Stylize) -> Result<()> {
                     // A quarter of the scene's default, which depends on how it is framed.
                     let (scene, _, _) = load_scene(&scene_dir, downscale, None)?;
                     cfg.schedule.steps =
-                        a.steps(None, cfg.pretrain_steps_for(scene.forward_facing));
+                        a.pretrain_steps(None, cfg.pretrain_steps_for(scene.forward_facing));
                 } else {
                     cfg.schedule.steps = a.pretrain_steps.unwrap_or(0);
                 }
