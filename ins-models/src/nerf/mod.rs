@@ -19,7 +19,6 @@ pub mod config;
 pub mod deferred;
 pub mod early_stop;
 pub mod eval;
-pub mod kept_density;
 pub mod mesh;
 pub mod model;
 pub mod render;

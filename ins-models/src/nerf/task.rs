@@ -22,7 +22,6 @@ use serde::{Deserialize, Serialize};
 use super::background::{LearnedBackground, fixed_background, learns_background};
 use super::deferred::PatchRender;
 use super::eval::{evaluate_views, save_eval_picture};
-use super::kept_density::{density_is_the_content_modules, shade, weigh};
 use super::model::NerfModel;
 use super::render::{RenderRays, Rendered, Sampling, render};
 use super::state_io::NerfState;
@@ -413,31 +412,6 @@ impl NerfTask {
                 .probe(probe.context("the loss was not evaluated")?)
                 .with_gradients(gradients)
                 .metric("samples_per_ray", samples as f64 / (k * k) as f64));
-        }
-        // The density kept: the weights are constants of the step, only the samples that
-        // weigh are shaded.
-        if let (None, Sampling::Occupancy { grid, max_per_ray }) = (&style.teacher, self.sampling())
-            && density_is_the_content_modules(model)
-        {
-            let weighed = weigh(model, &rays, grid, max_per_ray, seed, &self.device);
-            self.last_samples = weighed.marched;
-            let pixels = shade(
-                model,
-                &weighed,
-                perceptual.codes.clone(),
-                self.background,
-                &self.device,
-            );
-            let images = patch_images(pixels, styles, k);
-            let probe = perceptual.saturation_probe(images.clone(), photo, lr);
-            let (style_term, content_term) = perceptual.terms(images, &content_target);
-            return Ok(LossTerms::default()
-                .term("style", style_term)
-                .term("content", content_term)
-                .term("geometry", Tensor::zeros([1], &self.device))
-                .probe(probe)
-                .metric("samples_per_ray", weighed.marched as f64 / (k * k) as f64)
-                .metric("shaded_per_ray", weighed.len() as f64 / (k * k) as f64));
         }
         let out: Rendered = render(
             model,
