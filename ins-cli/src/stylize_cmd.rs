@@ -42,8 +42,8 @@ use crate::stylize_inputs::{MIN_PHOTOS, Photos, check_free_space, scene_files, w
 const STYLIZE_STEP_COST: f64 = 2.4;
 /// A NeRF stylizing step's VGG-16 pass, forward and back, in pretraining steps: with the
 /// default 64² patch shaded as `64² / rays` pretraining batches, this gives lego's 2.4 (about
-/// 6,000 rays a step) and a synthetic room capture's 8.7 (576 rays a step, 223 samples
-/// each: 5.5 s against 0.63 s a step, docs/measurements.md).
+/// 6,000 rays a step) and 8.8 for a synthetic room capture that took 9.9 (576 rays a step,
+/// 223 samples each: 6.3 s against 0.63 s a step, docs/measurements.md).
 const STYLIZE_VGG_COST: f64 = 1.7;
 /// Fewest pretraining steps of a `--quick` preview: a room capture of 50 photos at 200×150
 /// pretrained for a quarter of its 1000 steps stayed fog (17.21 dB held out, the objects
