@@ -163,15 +163,13 @@ impl Stylize {
         })
     }
 
-    /// Pretraining's [`Self::steps`], never fewer than [`QUICK_MIN_PRETRAIN_STEPS`] unless
-    /// asked for.
-    fn pretrain_steps(&self, steps: Option<usize>, default: usize) -> usize {
-        match steps {
-            Some(s) => s,
-            None => self
-                .steps(None, default)
-                .max(QUICK_MIN_PRETRAIN_STEPS.min(default)),
-        }
+    /// `--pretrain-steps`, or [`Self::steps`] of the variant's `default`, never fewer than
+    /// [`QUICK_MIN_PRETRAIN_STEPS`] (nor than `default`).
+    fn pretrain_steps_or(&self, default: usize) -> usize {
+        self.pretrain_steps.unwrap_or_else(|| {
+            self.steps(None, default)
+                .max(QUICK_MIN_PRETRAIN_STEPS.min(default))
+        })
     }
 
     /// Trains `cfg` into `out` as `ins-cli train` does (resuming where `resume` says); its steps.
@@ -360,8 +358,7 @@ pub fn run(a: Stylize) -> Result<()> {
                 let mut cfg = IdrRunConfig::default();
                 cfg.source.scene = Some(scene_dir.clone());
                 cfg.source.downscale = downscale;
-                cfg.schedule.steps =
-                    a.pretrain_steps(a.pretrain_steps, cfg.steps_for(RunKind::Pretrain));
+                cfg.schedule.steps = a.pretrain_steps_or(cfg.steps_for(RunKind::Pretrain));
                 a.train_stage(&pretrained, resume, AnyConfig::Idr(&cfg), &what, next)?
             } else {
                 let mut cfg = NerfRunConfig::default();
@@ -371,7 +368,7 @@ pub fn run(a: Stylize) -> Result<()> {
                     // A quarter of the scene's default, which depends on how it is framed.
                     let (scene, _, _) = load_scene(&scene_dir, downscale, None)?;
                     cfg.schedule.steps =
-                        a.pretrain_steps(None, cfg.pretrain_steps_for(scene.forward_facing));
+                        a.pretrain_steps_or(cfg.pretrain_steps_for(scene.forward_facing));
                 } else {
                     cfg.schedule.steps = a.pretrain_steps.unwrap_or(0);
                 }

@@ -197,10 +197,7 @@ pub fn point_sphere(views: &[View], points: &[Vec3]) -> Option<ObjectSphere> {
         object.iter().map(|p| (*p - center).length()).collect(),
         POINT_COVERAGE,
     );
-    let nearest = views
-        .iter()
-        .map(|v| (v.camera.origin() - center).length())
-        .fold(f32::INFINITY, f32::min);
+    let nearest = nearest_camera(views, center);
     Some(ObjectSphere {
         center,
         radius: (reach * SPHERE_MARGIN).min(nearest / MIN_CAMERA_DISTANCE),
@@ -300,7 +297,7 @@ pub fn into_unit_sphere(scene: Scene, use_masks: bool) -> Result<(Scene, ObjectS
         SphereSource::Points(n) => format!(
             "without masks, the object's unit sphere holds the {n} sparse points nearly every \
              view keeps in frame (the nearest camera {:.2} radii away)",
-            nearest_camera(&scene)
+            nearest_camera(&scene.views, Vec3::ZERO)
         ),
         SphereSource::Cameras => format!(
             "without masks or sparse points, the object's unit sphere is centred where the \
@@ -310,12 +307,11 @@ pub fn into_unit_sphere(scene: Scene, use_masks: bool) -> Result<(Scene, ObjectS
     Ok((scene, sphere))
 }
 
-/// The nearest camera's distance from the origin.
-fn nearest_camera(scene: &Scene) -> f32 {
-    scene
-        .views
+/// The nearest camera's distance from `center`.
+fn nearest_camera(views: &[View], center: Vec3) -> f32 {
+    views
         .iter()
-        .map(|v| v.camera.origin().length())
+        .map(|v| (v.camera.origin() - center).length())
         .fold(f32::INFINITY, f32::min)
 }
 
