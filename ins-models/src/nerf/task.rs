@@ -125,7 +125,8 @@ pub struct NerfTask {
 }
 
 /// Grid refreshes evaluate every cell during the first steps (while the field takes shape),
-/// then a quarter of the cells (half uniformly, half among occupied ones), as instant-ngp does.
+/// keeping only the latest densities, then a quarter of the cells (half uniformly, half among
+/// occupied ones) into a decaying running maximum, as instant-ngp does.
 const WARMUP_STEPS: usize = 256;
 const REFRESH_SHARE: usize = 4;
 
@@ -446,14 +447,9 @@ impl NerfTask {
         let Some(grid) = self.grid.as_mut() else {
             return;
         };
-        let cells = if step < WARMUP_STEPS {
-            usize::MAX
-        } else {
-            grid.density.len() / REFRESH_SHARE
-        };
         let field = model.field.valid();
         let device = self.device.clone().inner();
-        grid.update(cells, seed, |points| {
+        let density_at = |points: &[f32]| {
             let n = points.len() / 3;
             let mut out = Vec::with_capacity(n);
             for chunk in points.chunks(3 * 65536) {
@@ -469,7 +465,14 @@ impl NerfTask {
                 );
             }
             out
-        });
+        };
+        // During the warm-up the grid follows the field as it is: a running maximum there
+        // would keep the first steps' fog for hundreds of steps.
+        if step < WARMUP_STEPS {
+            grid.rebuild(seed, density_at);
+        } else {
+            grid.update(grid.density.len() / REFRESH_SHARE, seed, density_at);
+        }
     }
 
     fn evaluate(&self, model: &NerfModel, step: usize) -> Result<Vec<(String, f64)>> {
