@@ -361,17 +361,19 @@ pub fn run(a: Stylize) -> Result<()> {
                 cfg.schedule.steps = a.pretrain_steps_or(cfg.steps_for(RunKind::Pretrain));
                 a.train_stage(&pretrained, resume, AnyConfig::Idr(&cfg), &what, next)?
             } else {
-                let mut cfg = one_command_nerf();
+                let mut cfg = NerfRunConfig::default();
                 cfg.source.scene = Some(scene_dir.clone());
                 cfg.source.downscale = downscale;
-                if a.quick && a.pretrain_steps.is_none() {
-                    // A quarter of the scene's default, which depends on how it is framed.
-                    let (scene, _, _) = load_scene(&scene_dir, downscale, None)?;
-                    cfg.schedule.steps =
-                        a.pretrain_steps_or(cfg.pretrain_steps_for(scene.forward_facing));
-                } else {
-                    cfg.schedule.steps = a.pretrain_steps.unwrap_or(0);
-                }
+                cfg.schedule.steps = match a.pretrain_steps {
+                    Some(steps) => steps,
+                    None => {
+                        // The scene's default (or a quarter of it), which depends on how the
+                        // scene is framed.
+                        let (scene, _, _) = load_scene(&scene_dir, downscale, None)?;
+                        a.pretrain_steps_or(cfg.pretrain_steps_for(scene.forward_facing))
+                    }
+                };
+                cfg.eval_every = held_out_at_the_end(cfg.schedule.steps);
                 a.train_stage(&pretrained, resume, AnyConfig::Nerf(&cfg), &what, next)?
             };
             let seconds = t.elapsed().as_secs_f64();
@@ -408,10 +410,11 @@ pub fn run(a: Stylize) -> Result<()> {
                 cfg.schedule.steps = a.steps(a.stylize_steps, cfg.steps_for(RunKind::Stylize));
                 a.train_stage(&stylized, resume, AnyConfig::Idr(&cfg), &what, next)?;
             } else {
-                let mut cfg = one_command_nerf();
+                let mut cfg = NerfRunConfig::default();
                 cfg.source.from = Some(pretrained.clone());
                 cfg.style.styles = a.styles.clone();
                 cfg.schedule.steps = a.steps(a.stylize_steps, cfg.steps_for(RunKind::Stylize));
+                cfg.eval_every = held_out_at_the_end(cfg.schedule.steps);
                 a.train_stage(&stylized, resume, AnyConfig::Nerf(&cfg), &what, next)?;
             }
             manifest.finish("stylize", t.elapsed().as_secs_f64())?;
@@ -496,15 +499,12 @@ pub fn run(a: Stylize) -> Result<()> {
 }
 
 /// Removes a stage's output folder (one this command made inside its output folder).
-/// A NeRF run's settings in the one command: the defaults, held-out views evaluated at the end
-/// only. Why: each evaluation renders four held-out views in full, about a minute on 2 cores at
-/// ~400 px (fern at 504×378: 62 s of a 644 s, 1000-step pretraining), and the stage checklist
-/// already shows the progress a user waits on.
-fn one_command_nerf() -> NerfRunConfig {
-    NerfRunConfig {
-        eval_every: 0,
-        ..Default::default()
-    }
+/// The one command's NeRF runs score their held-out views once, at their last step (`steps`),
+/// for the report. Why not every 500 steps, as `train nerf` does: each evaluation renders four
+/// held-out views in full, about a minute on 2 cores at ~400 px (fern at 504×378: 62 s of a
+/// 644 s, 1000-step pretraining), and the stage checklist already shows the progress.
+fn held_out_at_the_end(steps: usize) -> usize {
+    steps.max(1)
 }
 
 fn remove(dir: &Path) -> Result<()> {

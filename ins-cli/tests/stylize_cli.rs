@@ -154,6 +154,11 @@ fn photos_to_video_report_and_mesh_in_one_command_that_continues_where_it_stoppe
     assert!(std::fs::metadata(&video).unwrap().len() > 0);
     let page = std::fs::read_to_string(out.join("report/index.html")).unwrap();
     assert!(page.contains("<h1>"), "not a report page");
+    // The pretraining's held-out score, evaluated once at its last step.
+    assert!(
+        page.contains("val_psnr"),
+        "the report shows no held-out PSNR of the pretraining"
+    );
     // A mesh where the field has a surface; a few steps may leave fog, which the report and
     // the log name.
     match summary["mesh"].as_str() {
