@@ -498,7 +498,6 @@ pub fn run(a: Stylize) -> Result<()> {
     Ok(())
 }
 
-/// Removes a stage's output folder (one this command made inside its output folder).
 /// The one command's NeRF runs score their held-out views once, at their last step (`steps`),
 /// for the report. Why not every 500 steps, as `train nerf` does: each evaluation renders four
 /// held-out views in full, about a minute on 2 cores at ~400 px (fern at 504×378: 62 s of a
@@ -507,6 +506,7 @@ fn held_out_at_the_end(steps: usize) -> usize {
     steps.max(1)
 }
 
+/// Removes a stage's output folder (one this command made inside its output folder).
 fn remove(dir: &Path) -> Result<()> {
     if dir.exists() {
         std::fs::remove_dir_all(dir).with_context(|| format!("removing {}", dir.display()))?;

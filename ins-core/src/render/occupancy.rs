@@ -162,12 +162,7 @@ impl OccupancyGrid {
     /// Refreshes the grid: evaluates `density_at` (positions `[n·3]` → densities `[n]`) at a
     /// random point of `cells` chosen cells (every cell when `cells` covers the grid; else half
     /// uniformly, half among occupied ones), decays and updates the running maxima and bits.
-    pub fn update(
-        &mut self,
-        cells: usize,
-        seed: u64,
-        density_at: impl FnMut(&[f32]) -> Vec<f32>,
-    ) {
+    pub fn update(&mut self, cells: usize, seed: u64, density_at: impl FnMut(&[f32]) -> Vec<f32>) {
         self.refresh(cells, seed, true, density_at);
     }
 

@@ -125,7 +125,7 @@ pub struct NerfTask {
 }
 
 /// Grid refreshes evaluate every cell during the first steps (while the field takes shape),
-/// keeping only the latest densities (but in forward-facing scenes), then a quarter of the
+/// keeping only the latest densities (except in forward-facing scenes), then a quarter of the
 /// cells (half uniformly, half among occupied ones) into a decaying running maximum, as
 /// instant-ngp does.
 const WARMUP_STEPS: usize = 256;
@@ -473,12 +473,12 @@ impl NerfTask {
         // rebuilt, 26.34 kept; lego 31.65 / 31.52). Forward-facing scenes (NDC) keep the
         // running maximum: there the rebuild cost 0.18 and 0.27 dB (fern, two seeds), their
         // fog clearing by step 400 either way (docs/measurements.md).
-        if step < WARMUP_STEPS && !forward_facing {
-            grid.rebuild(seed, density_at);
-        } else if step < WARMUP_STEPS {
+        if step >= WARMUP_STEPS {
+            grid.update(grid.density.len() / REFRESH_SHARE, seed, density_at);
+        } else if forward_facing {
             grid.update(usize::MAX, seed, density_at);
         } else {
-            grid.update(grid.density.len() / REFRESH_SHARE, seed, density_at);
+            grid.rebuild(seed, density_at);
         }
     }
 
