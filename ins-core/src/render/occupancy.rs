@@ -73,6 +73,36 @@ impl MarchedSamples {
             .max()
             .unwrap_or(0)
     }
+
+    /// Each ray's samples up to where it turns opaque under `density` (one value a sample,
+    /// in order): a sample is kept while the transmittance in front of it is at least
+    /// `min_transmittance`, so what the dropped ones could add to a pixel is below that. Also
+    /// returns the kept samples' indices into `self`. Why: with the density frozen
+    /// (stylization), the samples behind a surface cost the colour network's work and show
+    /// nothing.
+    pub fn until_opaque(&self, density: &[f32], min_transmittance: f32) -> (Self, Vec<u32>) {
+        let mut kept = Self {
+            offsets: Vec::with_capacity(self.offsets.len()),
+            ..Default::default()
+        };
+        let mut index = Vec::new();
+        kept.offsets.push(0);
+        for w in self.offsets.windows(2) {
+            let mut transmittance = 1f32;
+            for k in w[0] as usize..w[1] as usize {
+                if transmittance < min_transmittance {
+                    break;
+                }
+                kept.ray.push(self.ray[k]);
+                kept.t.push(self.t[k]);
+                kept.delta.push(self.delta[k]);
+                index.push(k as u32);
+                transmittance *= (-density[k].max(0.0) * self.delta[k]).exp();
+            }
+            kept.offsets.push(kept.t.len() as u32);
+        }
+        (kept, index)
+    }
 }
 
 impl OccupancyGrid {
@@ -322,6 +352,29 @@ mod tests {
                 if inside { 10.0 } else { 0.0 }
             })
             .collect()
+    }
+
+    #[test]
+    fn samples_behind_an_opaque_point_are_dropped() {
+        // Two rays of four samples: the first turns opaque at its second sample, the second
+        // stays clear.
+        let m = MarchedSamples {
+            ray: vec![0, 0, 0, 0, 1, 1, 1, 1],
+            t: vec![0.1, 0.2, 0.3, 0.4, 0.1, 0.2, 0.3, 0.4],
+            delta: vec![0.1; 8],
+            offsets: vec![0, 4, 8],
+        };
+        let density = [0.5, 200.0, 200.0, 200.0, 0.5, 0.5, 0.5, 0.5];
+        let (kept, index) = m.until_opaque(&density, 1e-4);
+        assert_eq!(index, vec![0, 1, 4, 5, 6, 7]);
+        assert_eq!(kept.offsets, vec![0, 2, 6]);
+        assert_eq!(kept.ray, vec![0, 0, 1, 1, 1, 1]);
+        assert_eq!(kept.t, vec![0.1, 0.2, 0.1, 0.2, 0.3, 0.4]);
+        // What the dropped samples could add is below the threshold.
+        let behind: f32 = (-(0.5f32 + 200.0) * 0.1).exp();
+        assert!(behind < 1e-4);
+        // With no threshold every sample stays.
+        assert_eq!(m.until_opaque(&density, 0.0).0, m);
     }
 
     fn grid() -> OccupancyGrid {

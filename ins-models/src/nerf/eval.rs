@@ -131,7 +131,10 @@ pub fn render_rays(
     while start < n {
         let end = (start + CHUNK).min(n);
         let chunk = rays.slice(start, end);
-        if let Sampling::Occupancy { grid, max_per_ray } = sampling {
+        if let Sampling::Occupancy {
+            grid, max_per_ray, ..
+        } = sampling
+        {
             let (rgb, depth, opacity) = render_early_stop(
                 model,
                 &chunk,

@@ -182,8 +182,22 @@ impl NerfModel {
     /// code of `codes [S, n_styles]` (or unstylized when `None` or without a stylizer). The
     /// content module runs once; only SIM, AM and colour run per style.
     pub fn evaluate(&self, x: Tensor<2>, dirs: Tensor<2>, codes: Option<Tensor<2>>) -> Evaluated {
-        let [n, _] = x.dims();
         let (raw, features) = self.field.geometry.forward(x.clone());
+        self.shade(x, raw, features, dirs, codes)
+    }
+
+    /// [`Self::evaluate`] past the content module: `raw [N]` and `features [N, F]` are the
+    /// geometry's outputs at `x [N, 3]` (computed once where a caller needs the density
+    /// first).
+    pub fn shade(
+        &self,
+        x: Tensor<2>,
+        raw: Tensor<1>,
+        features: Tensor<2>,
+        dirs: Tensor<2>,
+        codes: Option<Tensor<2>>,
+    ) -> Evaluated {
+        let [n, _] = x.dims();
         let (Some(st), Some(codes)) = (&self.stylizer, codes) else {
             let density = self.field.geometry.activate(raw.clone());
             let rgb = self.field.color.forward(features, dirs);

@@ -11,6 +11,7 @@ use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{RayBatch, Rays, flatten};
 
+use super::early_stop::MIN_TRANSMITTANCE;
 use super::model::NerfModel;
 
 /// Rays ready for rendering: the rays samples are placed along (NDC for forward-facing scenes)
@@ -93,6 +94,12 @@ pub enum Sampling<'a> {
         grid: &'a OccupancyGrid,
         /// Cap per ray.
         max_per_ray: usize,
+        /// Whether each ray is shaded only up to where it turns opaque (transmittance below
+        /// [`MIN_TRANSMITTANCE`]): the density is evaluated first, then the style and colour
+        /// networks only at the samples in front. Exact to 1e-4 of a pixel, and for gradients
+        /// too, only while the density does not train (stylization keeping it); there it
+        /// spares the colour work of every sample behind a surface.
+        until_opaque: bool,
     },
     /// NeRF: `coarse` stratified samples through the coarse field, then `fine` more from its
     /// weights, all through the fine field.
@@ -144,11 +151,15 @@ pub fn render(
     device: &Device,
 ) -> Rendered {
     match sampling {
-        Sampling::Occupancy { grid, max_per_ray } => render_marched(
+        Sampling::Occupancy {
+            grid,
+            max_per_ray,
+            until_opaque,
+        } => render_marched(
             model,
             rays,
             grid,
-            max_per_ray,
+            (max_per_ray, until_opaque),
             codes,
             background,
             seed,
@@ -165,7 +176,7 @@ fn render_marched(
     model: &NerfModel,
     rays: &RenderRays,
     grid: &OccupancyGrid,
-    max_per_ray: usize,
+    (max_per_ray, until_opaque): (usize, bool),
     codes: Option<Tensor<2>>,
     background: [f32; 3],
     seed: Option<u64>,
@@ -173,6 +184,32 @@ fn render_marched(
 ) -> Rendered {
     let r = rays.len();
     let mut m = grid.march(&rays.rays, max_per_ray, seed);
+    // With `until_opaque`, the geometry at every marched sample and the kept ones' indices.
+    let mut geometry = None;
+    if until_opaque && !m.is_empty() {
+        let n_eval = padded_size(m.len(), device);
+        let mut x = Vec::with_capacity(n_eval * 3);
+        for (&ray, &t) in m.ray.iter().zip(&m.t) {
+            x.extend(
+                grid.field_point(rays.rays.point(ray as usize, t))
+                    .to_array(),
+            );
+        }
+        pad_rows(&mut x, 3, n_eval);
+        let (raw, features) = model.field.geometry.forward(tensor2(x, n_eval, 3, device));
+        // Unreadable densities keep every sample: slower, never wrong.
+        let density = model
+            .field
+            .geometry
+            .activate(raw.clone())
+            .into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .unwrap_or_else(|_| vec![0.0; n_eval]);
+        let (kept, index) = m.until_opaque(&density, MIN_TRANSMITTANCE);
+        m = kept;
+        geometry = Some((raw, features, index));
+    }
     if m.is_empty() {
         // Keep the graph connected when no ray meets an occupied cell: one inert sample.
         m.ray.push(0);
@@ -218,11 +255,18 @@ fn render_marched(
         }
     }
     let points = tensor2(x, n_eval, 3, device);
-    let ev = model.evaluate(
-        points.clone(),
-        model.field.color.encode_dirs(&dirs, device),
-        codes,
-    );
+    let dirs = model.field.color.encode_dirs(&dirs, device);
+    let ev = match geometry {
+        Some((raw, features, mut index)) => {
+            index.resize(n_eval, index[0]);
+            let index: Vec<i64> = index.into_iter().map(i64::from).collect();
+            let index = Tensor::<1, Int>::from_data(TensorData::new(index, [n_eval]), device);
+            let raw = select_parallel(raw, 0, index.clone());
+            let features = select_parallel(features, 0, index);
+            model.shade(points.clone(), raw, features, dirs, codes)
+        }
+        None => model.evaluate(points.clone(), dirs, codes),
+    };
     let s = ev.density.dims()[0];
     let index = Tensor::<1, Int>::from_data(TensorData::new(index, [r * width]), device);
     let density = select_parallel(

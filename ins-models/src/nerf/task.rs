@@ -263,9 +263,13 @@ impl NerfTask {
     /// The sampling for this step's render.
     fn sampling(&self) -> Sampling<'_> {
         match (self.sampler, &self.grid) {
-            (Sampler::Marching { max_per_ray, .. }, Some(grid)) => {
-                Sampling::Occupancy { grid, max_per_ray }
-            }
+            (Sampler::Marching { max_per_ray, .. }, Some(grid)) => Sampling::Occupancy {
+                grid,
+                max_per_ray,
+                // Stylizing with the density kept (no teacher: the density is the pretrained
+                // one), a ray's samples behind its surface show nothing.
+                until_opaque: self.style.as_ref().is_some_and(|s| s.teacher.is_none()),
+            },
             (Sampler::CoarseFine { coarse, fine, .. }, _) => Sampling::CoarseFine { coarse, fine },
             (Sampler::Marching { .. }, None) => Sampling::CoarseFine {
                 coarse: 64,
