@@ -110,8 +110,8 @@ pub struct RunArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
-    /// The held-out views rendered once more at the end (`ins-cli stylize --quick` leaves
-    /// them out: its report shows the views).
+    /// The held-out views rendered once more at the end (`ins-cli stylize` leaves them out:
+    /// its report shows the views along the camera path).
     #[arg(skip = true)]
     pub final_pictures: bool,
 }

@@ -146,37 +146,11 @@ impl PatchRender<'_> {
 #[cfg(test)]
 mod tests {
     use burn::module::{Module, ModuleVisitor, Param};
-    use ins_core::modules::field::{CimKind, Geometry};
-    use ins_core::modules::style_position::StylePositionConfig;
     use ins_core::render::occupancy::OccupancyGrid;
     use ins_scene::geometry::Vec3;
-    use ins_scene::rays::Rays;
 
     use super::*;
-    use crate::nerf::model::NerfArch;
-
-    /// `k × k` rays from a camera at (0.3, −0.2, 2.5) through a square of the plane z = 0.
-    fn patch_rays(k: usize) -> RenderRays {
-        let eye = Vec3::new(0.3, -0.2, 2.5);
-        let mut rays = Rays::default();
-        for j in 0..k {
-            for i in 0..k {
-                let target = Vec3::new(
-                    -0.6 + 1.2 * i as f32 / (k - 1) as f32,
-                    -0.6 + 1.2 * j as f32 / (k - 1) as f32,
-                    0.0,
-                );
-                rays.origins.push(eye);
-                rays.directions.push((target - eye).normalize());
-                rays.near.push(0.5);
-                rays.far.push(4.5);
-            }
-        }
-        RenderRays {
-            view_dirs: rays.directions.clone(),
-            rays,
-        }
-    }
+    use crate::nerf::test_models::{dense_kept_density, patch_rays, stylized_model};
 
     /// The largest difference between two gradients of every parameter, relative to the
     /// largest entry of the first; and how many parameters had a gradient.
@@ -203,38 +177,10 @@ mod tests {
         }
     }
 
-    /// A small grid model with a two-style stylizer, drawn from `seed`.
-    fn stylized_model(seed: u64, d: &Device) -> NerfModel {
-        ins_core::train::seeding::seeded(d, seed, || stylized_model_unseeded(d))
-    }
-
-    fn stylized_model_unseeded(d: &Device) -> NerfModel {
-        let arch = NerfArch {
-            cim: CimKind::Grid,
-            log2_table: 10,
-            max_resolution: 32,
-        };
-        let position = StylePositionConfig::new()
-            .with_grid_resolution(32)
-            .with_grid_log2_table(10);
-        NerfModel::new(&arch, [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0], d)
-            .with_stylizer(2, 16, &position, d)
-    }
-
     #[test]
     fn shading_until_opaque_gives_the_whole_rays_pixels_and_gradients() {
         let d = Device::flex().autodiff();
-        let mut model = stylized_model(7, &d);
-        // Dense (about e³ times the fresh field) and frozen with the AM's density branch, as
-        // a kept density is while stylizing: the rays turn opaque inside the box.
-        model.field.geometry = match model.field.geometry {
-            Geometry::Grid(g) => Geometry::Grid(g.with_density_offset(-3.0)),
-            other => other,
-        }
-        .no_grad();
-        if let Some(st) = model.stylizer.as_mut() {
-            st.am.density = st.am.density.clone().no_grad();
-        }
+        let model = dense_kept_density(stylized_model(7, &d));
         let grid = OccupancyGrid::new(16, Vec3::splat(-1.0), Vec3::splat(1.0), 0.03);
         let rays = patch_rays(8);
         let codes = Tensor::<2>::from_floats([[1.0, 0.0], [0.0, 1.0]], &d);

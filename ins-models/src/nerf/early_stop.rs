@@ -30,6 +30,7 @@ pub fn render_early_stop(
     device: &Device,
 ) -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
     let r = rays.len();
+    let density_first = model.density_is_geometry();
     let m = grid.march(&rays.rays, max_per_ray, None);
     let mut transmittance = vec![1f32; r];
     let mut rgb = vec![0f32; 3 * r];
@@ -63,15 +64,46 @@ pub fn render_early_stop(
             dirs.extend(rays.view_dirs[ray].to_array());
         }
         let points = Tensor::<1>::from_floats(x.as_slice(), device).reshape([n, 3]);
-        let ev = model.evaluate(
-            points,
-            model.field.color.encode_dirs(&dirs, device),
-            code.clone(),
-        );
-        let sigma = host(ev.density)?;
-        let colour = host(ev.rgb)?;
+        // `shaded[f]` is the sample whose colour is `colour`'s row `f`.
+        let (sigma, colour, shaded) = if density_first {
+            // The density first; the stylizer and the colour only in front of where each
+            // ray turns opaque (a stylized field's colour is most of a sample's cost).
+            let (raw, features) = model.field.geometry.forward(points.clone());
+            let sigma = host(model.field.geometry.activate(raw.clone()))?;
+            let mut open = transmittance.clone();
+            let mut shaded = Vec::with_capacity(n);
+            for (j, (&ray, &k)) in owner.iter().zip(&index).enumerate() {
+                // As the compositing below steps it, so both keep the same samples.
+                if open[ray] >= MIN_TRANSMITTANCE {
+                    shaded.push(j);
+                    open[ray] *= 1.0 - (1.0 - (-sigma[j] * m.delta[k]).exp());
+                }
+            }
+            let rows: Vec<i64> = shaded.iter().map(|&j| j as i64).collect();
+            let rows = Tensor::<1, Int>::from_data(TensorData::new(rows, [shaded.len()]), device);
+            let shaded_dirs: Vec<f32> = shaded
+                .iter()
+                .flat_map(|&j| dirs[3 * j..3 * j + 3].iter().copied())
+                .collect();
+            let ev = model.shade(
+                points.select(0, rows.clone()),
+                raw.select(0, rows.clone()),
+                features.select(0, rows),
+                model.field.color.encode_dirs(&shaded_dirs, device),
+                code.clone(),
+            );
+            (sigma, host(ev.rgb)?, shaded)
+        } else {
+            let ev = model.evaluate(
+                points,
+                model.field.color.encode_dirs(&dirs, device),
+                code.clone(),
+            );
+            (host(ev.density)?, host(ev.rgb)?, (0..n).collect())
+        };
         // Samples of a ray are consecutive and in order along it.
-        for (j, (&ray, &k)) in owner.iter().zip(&index).enumerate() {
+        for (f, &j) in shaded.iter().enumerate() {
+            let (ray, k) = (owner[j], index[j]);
             let t_before = transmittance[ray];
             if t_before < MIN_TRANSMITTANCE {
                 continue;
@@ -79,7 +111,7 @@ pub fn render_early_stop(
             let alpha = 1.0 - (-sigma[j] * m.delta[k]).exp();
             let w = t_before * alpha;
             for c in 0..3 {
-                rgb[3 * ray + c] += w * colour[3 * j + c];
+                rgb[3 * ray + c] += w * colour[3 * f + c];
             }
             depth[ray] += w * m.t[k];
             transmittance[ray] = t_before * (1.0 - alpha);
@@ -102,4 +134,63 @@ fn host<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
         .convert::<f32>()
         .try_into_vec::<f32>()
         .map_err(|e| anyhow::anyhow!("reading a render: {e:?}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::Param;
+    use ins_core::render::occupancy::OccupancyGrid;
+    use ins_scene::geometry::Vec3;
+
+    use super::*;
+    use crate::nerf::render::{Sampling, render};
+    use crate::nerf::test_models::{dense_kept_density, patch_rays, stylized_model};
+
+    /// The largest difference between an early-stopped render of `model` and a render of
+    /// every sample (colour, opacity), under the first style.
+    fn against_full_render(model: &NerfModel, d: &Device) -> (f32, f32) {
+        let grid = OccupancyGrid::new(16, Vec3::splat(-1.0), Vec3::splat(1.0), 0.03);
+        let rays = patch_rays(8);
+        let code = Tensor::<2>::from_floats([[1.0, 0.0]], d);
+        let (rgb, _, opacity) =
+            render_early_stop(model, &rays, &grid, 256, Some(code.clone()), [0.2; 3], d).unwrap();
+        let sampling = Sampling::Occupancy {
+            grid: &grid,
+            max_per_ray: 256,
+            until_opaque: false,
+        };
+        let full = render(model, &rays, sampling, Some(code), [0.2; 3], None, d);
+        let worst = |a: &[f32], b: Vec<f32>| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0f32, f32::max)
+        };
+        (
+            worst(&rgb, host(full.fine.rgb).unwrap()),
+            worst(&opacity, host(full.fine.opacity).unwrap()),
+        )
+    }
+
+    #[test]
+    fn early_stopped_renders_match_every_sample_rendered() {
+        let d = Device::flex();
+        let mut model = dense_kept_density(stylized_model(3, &d));
+        // The density kept: it is read first, the stylizer runs only in front.
+        assert!(model.density_is_geometry());
+        let (rgb, opacity) = against_full_render(&model, &d);
+        assert!(
+            rgb < 2e-4 && opacity < 2e-4,
+            "colour {rgb}, opacity {opacity}"
+        );
+        // A stylized density (λ ≠ 1): every sample of a round is evaluated with the stylizer.
+        let st = model.stylizer.as_mut().unwrap();
+        st.am.density.lambda = Param::from_tensor(Tensor::from_floats([0.9], &d));
+        assert!(!model.density_is_geometry());
+        let (rgb, opacity) = against_full_render(&model, &d);
+        assert!(
+            rgb < 2e-4 && opacity < 2e-4,
+            "colour {rgb}, opacity {opacity}"
+        );
+    }
 }

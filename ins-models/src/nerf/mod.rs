@@ -26,6 +26,8 @@ pub mod run;
 pub mod scene_render;
 pub mod state_io;
 pub mod task;
+#[cfg(test)]
+mod test_models;
 pub mod view_audit;
 
 pub use config::NerfRunConfig;

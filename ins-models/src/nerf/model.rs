@@ -152,6 +152,15 @@ impl NerfModel {
         self.stylizer.as_ref().map_or(0, |s| s.sim.n_styles())
     }
 
+    /// Whether the density is the content module's alone: no stylizer, or the AM's density
+    /// blend at λ = 1, which passes the content's through untouched (a stylization that kept
+    /// the density). Renders then find where rays turn opaque before running the stylizer.
+    pub fn density_is_geometry(&self) -> bool {
+        self.stylizer
+            .as_ref()
+            .is_none_or(|st| st.am.density.lambda.val().into_scalar::<f32>() == 1.0)
+    }
+
     /// Positions `[N, 3]` → `[-1, 1]³` over the scene box (the SIM's position input).
     fn unit_positions(&self, x: Tensor<2>) -> Tensor<2> {
         let a = self.aabb;
