@@ -3,7 +3,9 @@
 //! marched through an occupancy grid holding a shell between radii 0.3 and 0.8 (about 22 samples
 //! a ray; lego's stylization marches 27–33); NNFM guided by the photo
 //! within the default match radius; the geometry loss against the frozen teacher), backward,
-//! Adam. The step users run most; VGG and the painting are random, as in `nerf-stylize`.
+//! Adam. The step users run most; VGG and the painting are random, as in `nerf-stylize`. The
+//! field is fresh and nearly transparent, so no ray turns opaque: the samples behind a surface
+//! that a real stylization leaves unshaded (lego: about 15 of 26 a ray) are all shaded here.
 
 use anyhow::Result;
 use burn::prelude::*;
