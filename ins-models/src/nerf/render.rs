@@ -3,7 +3,7 @@
 
 use burn::prelude::*;
 use ins_core::render::gather::select_parallel;
-use ins_core::render::occupancy::OccupancyGrid;
+use ins_core::render::occupancy::{MarchedSamples, OccupancyGrid};
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite};
 use ins_core::shape_buckets::{pad_rows, padded_size};
@@ -159,7 +159,8 @@ pub fn render(
             model,
             rays,
             grid,
-            (max_per_ray, until_opaque),
+            max_per_ray,
+            until_opaque,
             codes,
             background,
             seed,
@@ -176,7 +177,8 @@ fn render_marched(
     model: &NerfModel,
     rays: &RenderRays,
     grid: &OccupancyGrid,
-    (max_per_ray, until_opaque): (usize, bool),
+    max_per_ray: usize,
+    until_opaque: bool,
     codes: Option<Tensor<2>>,
     background: [f32; 3],
     seed: Option<u64>,
@@ -188,14 +190,9 @@ fn render_marched(
     let mut geometry = None;
     if until_opaque && !m.is_empty() {
         let n_eval = padded_size(m.len(), device);
-        let mut x = Vec::with_capacity(n_eval * 3);
-        for (&ray, &t) in m.ray.iter().zip(&m.t) {
-            x.extend(
-                grid.field_point(rays.rays.point(ray as usize, t))
-                    .to_array(),
-            );
-        }
-        pad_rows(&mut x, 3, n_eval);
+        let x = sample_rows(&m, n_eval, |ray, t| {
+            grid.field_point(rays.rays.point(ray, t))
+        });
         let (raw, features) = model.field.geometry.forward(tensor2(x, n_eval, 3, device));
         // Unreadable densities keep every sample: slower, never wrong.
         let density = model
@@ -222,17 +219,10 @@ fn render_marched(
     // of one step serve the next; the extra samples repeat the first and no ray reads them.
     let n_eval = padded_size(n, device);
     let width = padded_size(m.max_per_ray().max(1), device);
-    let mut x = Vec::with_capacity(n_eval * 3);
-    let mut dirs = Vec::with_capacity(n_eval * 3);
-    for (&ray, &t) in m.ray.iter().zip(&m.t) {
-        x.extend(
-            grid.field_point(rays.rays.point(ray as usize, t))
-                .to_array(),
-        );
-        dirs.extend(rays.view_dirs[ray as usize].to_array());
-    }
-    pad_rows(&mut x, 3, n_eval);
-    pad_rows(&mut dirs, 3, n_eval);
+    let x = sample_rows(&m, n_eval, |ray, t| {
+        grid.field_point(rays.rays.point(ray, t))
+    });
+    let dirs = sample_rows(&m, n_eval, |ray, _| rays.view_dirs[ray]);
     // Padded [R, width] layout: index into the evaluated samples, `n_eval` (a zero) for padding.
     let mut index = vec![n_eval as i64; r * width];
     let mut t_pad = vec![0f32; r * width];
@@ -290,6 +280,16 @@ fn render_marched(
         raw: ev.raw,
         samples: n,
     }
+}
+
+/// A value `at(ray, t)` for each of `m`'s samples as rows of three, padded to `rows` rows.
+fn sample_rows(m: &MarchedSamples, rows: usize, at: impl Fn(usize, f32) -> Vec3) -> Vec<f32> {
+    let mut out = Vec::with_capacity(rows * 3);
+    for (&ray, &t) in m.ray.iter().zip(&m.t) {
+        out.extend(at(ray as usize, t).to_array());
+    }
+    pad_rows(&mut out, 3, rows);
+    out
 }
 
 #[allow(clippy::too_many_arguments)]
