@@ -150,6 +150,7 @@ mod tests {
     use ins_scene::geometry::Vec3;
 
     use super::*;
+    use crate::nerf::early_stop::INVISIBLE_TRANSMITTANCE;
     use crate::nerf::test_models::{dense_kept_density, patch_rays, stylized_model};
 
     /// The largest difference between two gradients of every parameter, relative to the
@@ -202,7 +203,7 @@ mod tests {
         let grid = OccupancyGrid::new(16, Vec3::splat(-1.0), Vec3::splat(1.0), 0.03);
         let rays = patch_rays(8);
         let codes = Tensor::<2>::from_floats([[1.0, 0.0], [0.0, 1.0]], &d);
-        let render_with = |until_opaque: bool| {
+        let render_with = |until_opaque: Option<f32>| {
             let sampling = Sampling::Occupancy {
                 grid: &grid,
                 max_per_ray: 96,
@@ -218,23 +219,40 @@ mod tests {
                 &d,
             );
             // Every pixel's gradient 1: no cancellation between rays, so each parameter's
-            // gradient differs by at most what the dropped samples carry (under 1e-4 of each
-            // ray's weight) relative to the whole.
+            // gradient differs by at most what the dropped samples carry (under the threshold
+            // of each ray's weight) relative to the whole.
             let loss = out.fine.rgb.clone().sum();
             let grads = GradientsParams::from_grads(loss.backward(), &model);
             (out.fine.rgb, out.samples, grads)
         };
-        let (all_rgb, all_samples, all_grads) = render_with(false);
-        let (kept_rgb, kept_samples, kept_grads) = render_with(true);
+        let (all_rgb, all_samples, all_grads) = render_with(None);
+        let (kept_rgb, kept_samples, kept_grads) = render_with(Some(1e-4));
         assert!(
             kept_samples * 2 < all_samples,
             "{kept_samples} of {all_samples} samples shaded: the rays did not turn opaque"
         );
-        let diff = (all_rgb - kept_rgb).abs().max().into_scalar::<f32>();
+        let diff = (all_rgb.clone() - kept_rgb)
+            .abs()
+            .max()
+            .into_scalar::<f32>();
         assert!(diff < 1e-4, "pixels differ by {diff}");
         let worst = worst_gradient_difference(&model, &all_grads, &kept_grads);
         // Measured: 7e-5 at most.
         assert!(worst < 2e-4, "relative difference {worst}");
+        // The stylization's threshold: pixels within half an 8-bit level, gradients within
+        // the weight it drops.
+        let (kept_rgb, fewer, kept_grads) = render_with(Some(INVISIBLE_TRANSMITTANCE));
+        assert!(
+            fewer < kept_samples,
+            "{fewer} against {kept_samples} samples"
+        );
+        let diff = (all_rgb - kept_rgb).abs().max().into_scalar::<f32>();
+        assert!(diff < 1.0 / 510.0, "pixels differ by {diff}");
+        let worst = worst_gradient_difference(&model, &all_grads, &kept_grads);
+        assert!(
+            worst < 2.0 * INVISIBLE_TRANSMITTANCE,
+            "relative difference {worst}"
+        );
     }
 
     #[test]
@@ -252,7 +270,7 @@ mod tests {
             sampling: Sampling::Occupancy {
                 grid: &grid,
                 max_per_ray: 96,
-                until_opaque: false,
+                until_opaque: None,
             },
             codes: &codes,
             background: [0.2, 0.3, 0.4],

@@ -13,7 +13,7 @@ use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::camera_rays;
 
-use super::early_stop::render_early_stop;
+use super::early_stop::{INVISIBLE_TRANSMITTANCE, render_early_stop};
 use super::model::NerfModel;
 use super::render::{RenderRays, Sampling, render};
 
@@ -142,6 +142,7 @@ pub fn render_rays(
                 max_per_ray,
                 code.clone(),
                 background,
+                INVISIBLE_TRANSMITTANCE,
                 device,
             )?;
             out.rgb.extend(rgb);

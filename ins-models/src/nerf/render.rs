@@ -11,7 +11,6 @@ use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{RayBatch, Rays, flatten};
 
-use super::early_stop::MIN_TRANSMITTANCE;
 use super::model::NerfModel;
 
 /// Rays ready for rendering: the rays samples are placed along (NDC for forward-facing scenes)
@@ -94,12 +93,13 @@ pub enum Sampling<'a> {
         grid: &'a OccupancyGrid,
         /// Cap per ray.
         max_per_ray: usize,
-        /// Whether each ray is shaded only up to where it turns opaque (transmittance below
-        /// [`MIN_TRANSMITTANCE`]): the density is evaluated first, then the style and colour
-        /// networks only at the samples in front. Exact to 1e-4 of a pixel, and for gradients
-        /// too, only while the density does not train (stylization keeping it); there it
-        /// spares the colour work of every sample behind a surface.
-        until_opaque: bool,
+        /// `Some(t)`: each ray is shaded only up to where its transmittance falls below `t`
+        /// (it turns opaque): the density is evaluated first, then the style and colour
+        /// networks only at the samples in front. A pixel then differs by under `t` from the
+        /// whole ray's, and its gradients by what the dropped samples carry; right only while
+        /// the density does not train (stylization keeping it), where it spares the colour
+        /// work of every sample behind a surface.
+        until_opaque: Option<f32>,
     },
     /// NeRF: `coarse` stratified samples through the coarse field, then `fine` more from its
     /// weights, all through the fine field.
@@ -178,7 +178,7 @@ fn render_marched(
     rays: &RenderRays,
     grid: &OccupancyGrid,
     max_per_ray: usize,
-    until_opaque: bool,
+    until_opaque: Option<f32>,
     codes: Option<Tensor<2>>,
     background: [f32; 3],
     seed: Option<u64>,
@@ -188,7 +188,7 @@ fn render_marched(
     let mut m = grid.march(&rays.rays, max_per_ray, seed);
     // With `until_opaque`, the geometry at every marched sample and the kept ones' indices.
     let mut geometry = None;
-    if until_opaque && !m.is_empty() {
+    if let Some(min_transmittance) = until_opaque.filter(|_| !m.is_empty()) {
         let n_eval = padded_size(m.len(), device);
         let x = sample_rows(&m, n_eval, |ray, t| {
             grid.field_point(rays.rays.point(ray, t))
@@ -203,7 +203,7 @@ fn render_marched(
             .convert::<f32>()
             .try_into_vec::<f32>()
             .unwrap_or_else(|_| vec![0.0; n_eval]);
-        let (kept, index) = m.until_opaque(&density, MIN_TRANSMITTANCE);
+        let (kept, index) = m.until_opaque(&density, min_transmittance);
         m = kept;
         geometry = Some((raw, features, index));
     }

@@ -313,7 +313,7 @@ pub fn render_sampling<'a>(cfg: &NerfRunConfig, grid: Option<&'a OccupancyGrid>)
         (CimKind::Grid, Some(grid)) => Sampling::Occupancy {
             grid,
             max_per_ray: cfg.max_samples_per_ray.max(1024),
-            until_opaque: false,
+            until_opaque: None,
         },
         _ => Sampling::CoarseFine {
             coarse: cfg.coarse_samples,

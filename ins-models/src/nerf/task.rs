@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 
 use super::background::{LearnedBackground, fixed_background, learns_background};
 use super::deferred::PatchRender;
+use super::early_stop::INVISIBLE_TRANSMITTANCE;
 use super::eval::{evaluate_views, save_eval_picture};
 use super::model::NerfModel;
 use super::render::{RenderRays, Rendered, Sampling, render};
@@ -268,7 +269,11 @@ impl NerfTask {
                 max_per_ray,
                 // Stylizing with the density kept (no teacher: the density is the pretrained
                 // one), a ray's samples behind its surface show nothing.
-                until_opaque: self.style.as_ref().is_some_and(|s| s.teacher.is_none()),
+                until_opaque: self
+                    .style
+                    .as_ref()
+                    .is_some_and(|s| s.teacher.is_none())
+                    .then_some(INVISIBLE_TRANSMITTANCE),
             },
             (Sampler::CoarseFine { coarse, fine, .. }, _) => Sampling::CoarseFine { coarse, fine },
             (Sampler::Marching { .. }, None) => Sampling::CoarseFine {
