@@ -178,15 +178,22 @@ impl<B: Backend + DenseOps, C: CheckpointStrategy> DenseOps for Autodiff<B, C> {
 /// `layer.forward(x)` for `x [N, in]`: through the op on Flex (with or without autodiff),
 /// through Burn's `Linear` elsewhere.
 pub fn dense(layer: &Linear, x: Tensor<2>) -> Tensor<2> {
-    let flex = matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_));
-    if !flex {
-        return layer.forward(x);
-    }
     let w = layer.weight.val();
     let b = match &layer.bias {
         Some(b) => b.val(),
         None => Tensor::zeros([w.dims()[1]], &w.device()),
     };
+    dense_with(x, w, b)
+}
+
+/// `x [N, I]·w [I, O] + b [O]` for any weight and bias (a part of a layer's, or a bias that
+/// folds in what is constant over the rows): the op on Flex, a matmul elsewhere.
+pub fn dense_with(x: Tensor<2>, w: Tensor<2>, b: Tensor<1>) -> Tensor<2> {
+    let flex = matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_));
+    if !flex {
+        let o = w.dims()[1];
+        return x.matmul(w) + b.reshape([1, o]);
+    }
     Tensor::from_dispatch(<Dispatch as DenseOps>::dense(
         x.into_dispatch(),
         w.into_dispatch(),

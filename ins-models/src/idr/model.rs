@@ -292,7 +292,7 @@ impl IdrModel {
         let (Some(st), Some(codes)) = (&self.stylizer, codes) else {
             return self.color.forward(x, n, dirs, f).reshape([1, count, 3]);
         };
-        let [s, k] = codes.dims();
+        let s = codes.dims()[0];
         let rep = |t: Tensor<2>| -> Tensor<2> {
             let w = t.dims()[1];
             if s == 1 {
@@ -304,11 +304,7 @@ impl IdrModel {
             }
         };
         let pos = st.position.encode(x.clone());
-        let code_rows = codes
-            .reshape([s, 1, k])
-            .expand([s, count, k])
-            .reshape([s * count, k]);
-        let style = st.sim.forward(code_rows, Some(rep(pos)));
+        let style = st.sim.forward_per_style(codes, pos);
         let f = st.am.forward(rep(f), style);
         self.color
             .forward(rep(x), rep(n), rep(dirs), f)

@@ -192,12 +192,14 @@ impl NerfModel {
     /// content module runs once; only SIM, AM and colour run per style.
     pub fn evaluate(&self, x: Tensor<2>, dirs: Tensor<2>, codes: Option<Tensor<2>>) -> Evaluated {
         let (raw, features) = self.field.geometry.forward(x.clone());
-        self.shade(x, raw, features, dirs, codes)
+        self.stylized(x, raw, features, dirs, codes, false)
     }
 
-    /// [`Self::evaluate`] past the content module: `raw [N]` and `features [N, F]` are the
-    /// geometry's outputs at `x [N, 3]` (computed once where a caller needs the density
-    /// first).
+    /// [`Self::evaluate`] past the content module, for a field whose density is the content
+    /// module's ([`Self::density_is_geometry`]: read first, to shade only where rays are
+    /// still open): `raw [N]` and `features [N, F]` are the geometry's outputs at `x [N, 3]`.
+    /// The AM's density branch is not run: its λ = 1 passes the content's density through
+    /// untouched, and it was a seventh of a stylized sample's products.
     pub fn shade(
         &self,
         x: Tensor<2>,
@@ -205,6 +207,19 @@ impl NerfModel {
         features: Tensor<2>,
         dirs: Tensor<2>,
         codes: Option<Tensor<2>>,
+    ) -> Evaluated {
+        self.stylized(x, raw, features, dirs, codes, true)
+    }
+
+    /// [`Self::evaluate`] from the geometry's outputs; `kept_density`: see [`Self::shade`].
+    fn stylized(
+        &self,
+        x: Tensor<2>,
+        raw: Tensor<1>,
+        features: Tensor<2>,
+        dirs: Tensor<2>,
+        codes: Option<Tensor<2>>,
+        kept_density: bool,
     ) -> Evaluated {
         let [n, _] = x.dims();
         let (Some(st), Some(codes)) = (&self.stylizer, codes) else {
@@ -216,7 +231,7 @@ impl NerfModel {
                 raw: raw.reshape([1, n]),
             };
         };
-        let [s, k] = codes.dims();
+        let s = codes.dims()[0];
         let repeat2 = |t: Tensor<2>| -> Tensor<2> {
             let w = t.dims()[1];
             if s == 1 {
@@ -228,13 +243,13 @@ impl NerfModel {
             }
         };
         let pos = st.position.encode(self.unit_positions(x));
-        let code_rows = codes
-            .reshape([s, 1, k])
-            .expand([s, n, k])
-            .reshape([s * n, k]);
-        let style = st.sim.forward(code_rows, Some(repeat2(pos)));
+        let style = st.sim.forward_per_style(codes, pos);
         let raw_rep: Tensor<1> = repeat2(raw.reshape([n, 1])).reshape([s * n]);
-        let (raw_s, feat_s) = st.am.forward(raw_rep, repeat2(features), style);
+        let (raw_s, feat_s) = if kept_density {
+            (raw_rep, st.am.feature.forward(repeat2(features), style))
+        } else {
+            st.am.forward(raw_rep, repeat2(features), style)
+        };
         let density = self.field.geometry.activate(raw_s.clone());
         let rgb = self.field.color.forward(feat_s, repeat2(dirs));
         Evaluated {
