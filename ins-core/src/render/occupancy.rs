@@ -74,6 +74,31 @@ impl MarchedSamples {
             .unwrap_or(0)
     }
 
+    /// The next round of samples along the rays still open: up to `round` more of each ray
+    /// from its `cursor` (an index into `self`, moved past them), skipping the rays whose
+    /// `transmittance` fell below `min_transmittance` and those with no samples left. Returns
+    /// their indices into `self`, ray by ray. Renders that stop rays once opaque evaluate
+    /// rounds of growing length, so that few samples behind a surface are ever evaluated.
+    pub fn next_round(
+        &self,
+        cursor: &mut [usize],
+        transmittance: &[f32],
+        min_transmittance: f32,
+        round: usize,
+    ) -> Vec<usize> {
+        let mut index = Vec::new();
+        for (ray, at) in cursor.iter_mut().enumerate() {
+            let end = self.offsets[ray + 1] as usize;
+            if transmittance[ray] < min_transmittance || *at >= end {
+                continue;
+            }
+            let stop = at.saturating_add(round).min(end);
+            index.extend(*at..stop);
+            *at = stop;
+        }
+        index
+    }
+
     /// Each ray's samples up to where it turns opaque under `density` (one value a sample,
     /// in order): a sample is kept while the transmittance in front of it is at least
     /// `min_transmittance`, so what the dropped ones could add to a pixel is below that. Also

@@ -3,11 +3,13 @@
 //! render does not: samples are evaluated in rounds of growing length, composited on the host,
 //! and a ray whose transmittance fell below a threshold ([`INVISIBLE_TRANSMITTANCE`] for
 //! pictures) takes no more samples. On lego, most samples of a surface ray lie inside the
-//! object, behind its surface.
+//! object, behind its surface. A stylization step that keeps the density reads it in the same
+//! rounds ([`geometry_until_opaque`]).
 
 use anyhow::Result;
 use burn::prelude::*;
-use ins_core::render::occupancy::OccupancyGrid;
+use ins_core::render::occupancy::{MarchedSamples, OccupancyGrid};
+use ins_core::shape_buckets::{compiles_per_size, pad_rows, padded_size};
 
 use super::model::NerfModel;
 use super::render::RenderRays;
@@ -48,23 +50,11 @@ pub fn render_early_stop(
     let mut round = FIRST_ROUND;
     loop {
         // The next `round` samples of every ray still open.
-        let mut owner = Vec::new();
-        let mut index = Vec::new();
-        for ray in 0..r {
-            let end = m.offsets[ray + 1] as usize;
-            if transmittance[ray] < min_transmittance || cursor[ray] >= end {
-                continue;
-            }
-            let stop = (cursor[ray] + round).min(end);
-            for k in cursor[ray]..stop {
-                owner.push(ray);
-                index.push(k);
-            }
-            cursor[ray] = stop;
-        }
+        let index = m.next_round(&mut cursor, &transmittance, min_transmittance, round);
         if index.is_empty() {
             break;
         }
+        let owner: Vec<usize> = index.iter().map(|&k| m.ray[k] as usize).collect();
         let n = index.len();
         let mut x = Vec::with_capacity(3 * n);
         let mut dirs = Vec::with_capacity(3 * n);
@@ -138,6 +128,71 @@ pub fn render_early_stop(
     Ok((rgb, depth, opacity))
 }
 
+/// The geometry of `m`'s samples along `rays` up to where each ray turns opaque: the samples
+/// [`MarchedSamples::until_opaque`] keeps, the raw density `[E]` and features `[E, F]` of
+/// every sample evaluated, and the kept samples' rows in them. What a stylization step that
+/// keeps the density shades. On the CPU the samples are evaluated in rounds of growing length,
+/// so that most of those behind a surface are not (half of a capture's marched samples);
+/// where kernels are compiled per size (GPUs) in one round, as each round reads the
+/// densities back.
+pub(crate) fn geometry_until_opaque(
+    model: &NerfModel,
+    rays: &RenderRays,
+    grid: &OccupancyGrid,
+    m: &MarchedSamples,
+    min_transmittance: f32,
+    device: &Device,
+) -> (MarchedSamples, Tensor<1>, Tensor<2>, Vec<u32>) {
+    let r = m.offsets.len() - 1;
+    let mut cursor: Vec<usize> = m.offsets[..r].iter().map(|&o| o as usize).collect();
+    let mut transmittance = vec![1f32; r];
+    // Samples never evaluated lie behind a point where their ray was already opaque.
+    let mut density = vec![0f32; m.len()];
+    let mut row_of = vec![0u32; m.len()];
+    let (mut raws, mut features) = (Vec::new(), Vec::new());
+    let mut rows = 0;
+    let mut round = if compiles_per_size(device) {
+        usize::MAX
+    } else {
+        FIRST_ROUND
+    };
+    loop {
+        let index = m.next_round(&mut cursor, &transmittance, min_transmittance, round);
+        if index.is_empty() {
+            break;
+        }
+        let n_eval = padded_size(index.len(), device);
+        let mut x = Vec::with_capacity(3 * n_eval);
+        for &k in &index {
+            let point = rays.rays.point(m.ray[k] as usize, m.t[k]);
+            x.extend(grid.field_point(point).to_array());
+        }
+        pad_rows(&mut x, 3, n_eval);
+        let points = Tensor::<1>::from_floats(x.as_slice(), device).reshape([n_eval, 3]);
+        let (raw, feature) = model.field.geometry.forward(points);
+        // Unreadable densities keep every sample: slower, never wrong.
+        let sigma =
+            host(model.field.geometry.activate(raw.clone())).unwrap_or_else(|_| vec![0.0; n_eval]);
+        for (j, &k) in index.iter().enumerate() {
+            density[k] = sigma[j];
+            row_of[k] = (rows + j) as u32;
+            transmittance[m.ray[k] as usize] *= (-sigma[j].max(0.0) * m.delta[k]).exp();
+        }
+        rows += n_eval;
+        raws.push(raw);
+        features.push(feature);
+        round = round.saturating_mul(2);
+    }
+    let (kept, index) = m.until_opaque(&density, min_transmittance);
+    let kept_rows = index.iter().map(|&k| row_of[k as usize]).collect();
+    let (raw, features) = if raws.len() == 1 {
+        (raws.remove(0), features.remove(0))
+    } else {
+        (Tensor::cat(raws, 0), Tensor::cat(features, 0))
+    };
+    (kept, raw, features, kept_rows)
+}
+
 fn host<const D: usize>(t: Tensor<D>) -> Result<Vec<f32>> {
     t.into_data()
         .convert::<f32>()
@@ -189,6 +244,54 @@ mod tests {
             worst(&rgb, host(full.fine.rgb).unwrap()),
             worst(&opacity, host(full.fine.opacity).unwrap()),
         )
+    }
+
+    /// The rounds keep exactly the samples (and their geometry) that every sample's density
+    /// read at once keeps, while evaluating fewer.
+    #[test]
+    fn geometry_read_in_rounds_keeps_what_every_sample_keeps() {
+        let d = Device::flex();
+        let model = dense_kept_density(stylized_model(3, &d));
+        let grid = OccupancyGrid::new(16, Vec3::splat(-1.0), Vec3::splat(1.0), 0.03);
+        let rays = patch_rays(8);
+        let m = grid.march(&rays.rays, 256, Some(5));
+        let (kept, raw, features, rows) =
+            geometry_until_opaque(&model, &rays, &grid, &m, INVISIBLE_TRANSMITTANCE, &d);
+        assert!(
+            raw.dims()[0] < m.len(),
+            "{} of {} evaluated",
+            raw.dims()[0],
+            m.len()
+        );
+        let x: Vec<f32> = (0..m.len())
+            .flat_map(|k| {
+                let p = rays.rays.point(m.ray[k] as usize, m.t[k]);
+                grid.field_point(p).to_array()
+            })
+            .collect();
+        let x = Tensor::<1>::from_floats(x.as_slice(), &d).reshape([m.len(), 3]);
+        let (all_raw, all_features) = model.field.geometry.forward(x);
+        let density = host(model.field.geometry.activate(all_raw.clone())).unwrap();
+        let (want, index) = m.until_opaque(&density, INVISIBLE_TRANSMITTANCE);
+        assert!(want.len() * 2 < m.len(), "the rays did not turn opaque");
+        assert_eq!((&kept.offsets, &kept.t), (&want.offsets, &want.t));
+        let pick = |v: &[u32]| {
+            let v: Vec<i64> = v.iter().map(|&i| i as i64).collect();
+            Tensor::<1, Int>::from_data(TensorData::new(v.clone(), [v.len()]), &d)
+        };
+        let worst = |a: Tensor<2>, b: Tensor<2>| (a - b).abs().max().into_scalar::<f32>();
+        let raw_diff = worst(
+            raw.select(0, pick(&rows)).reshape([-1, 1]),
+            all_raw.select(0, pick(&index)).reshape([-1, 1]),
+        );
+        let feature_diff = worst(
+            features.select(0, pick(&rows)),
+            all_features.select(0, pick(&index)),
+        );
+        assert!(
+            raw_diff < 1e-5 && feature_diff < 1e-5,
+            "{raw_diff} {feature_diff}"
+        );
     }
 
     #[test]

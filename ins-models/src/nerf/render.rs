@@ -11,6 +11,7 @@ use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{RayBatch, Rays, flatten};
 
+use super::early_stop::geometry_until_opaque;
 use super::model::NerfModel;
 
 /// Rays ready for rendering: the rays samples are placed along (NDC for forward-facing scenes)
@@ -186,26 +187,13 @@ fn render_marched(
 ) -> Rendered {
     let r = rays.len();
     let mut m = grid.march(&rays.rays, max_per_ray, seed);
-    // With `until_opaque`, the geometry at every marched sample and the kept ones' indices.
+    // With `until_opaque`, the geometry of the samples evaluated and the kept ones' rows.
     let mut geometry = None;
     if let Some(min_transmittance) = until_opaque.filter(|_| !m.is_empty()) {
-        let n_eval = padded_size(m.len(), device);
-        let x = sample_rows(&m, n_eval, |ray, t| {
-            grid.field_point(rays.rays.point(ray, t))
-        });
-        let (raw, features) = model.field.geometry.forward(tensor2(x, n_eval, 3, device));
-        // Unreadable densities keep every sample: slower, never wrong.
-        let density = model
-            .field
-            .geometry
-            .activate(raw.clone())
-            .into_data()
-            .convert::<f32>()
-            .try_into_vec::<f32>()
-            .unwrap_or_else(|_| vec![0.0; n_eval]);
-        let (kept, index) = m.until_opaque(&density, min_transmittance);
+        let (kept, raw, features, rows) =
+            geometry_until_opaque(model, rays, grid, &m, min_transmittance, device);
         m = kept;
-        geometry = Some((raw, features, index));
+        geometry = Some((raw, features, rows));
     }
     if m.is_empty() {
         // Keep the graph connected when no ray meets an occupied cell: one inert sample.
