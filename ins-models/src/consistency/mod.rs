@@ -106,8 +106,11 @@ impl PathRenders {
         let mut pretrained = Vec::with_capacity(cameras.len());
         let mut stylized = Vec::with_capacity(cameras.len());
         for (i, cam) in cameras.iter().enumerate() {
-            pretrained.push(pair.teacher.frame(cam, None, device)?);
-            stylized.push(pair.student.frame(cam, code.clone(), device)?);
+            let (teacher, student) =
+                pair.student
+                    .frame_pair(pair.teacher.as_ref(), cam, code.clone(), device)?;
+            pretrained.push(teacher);
+            stylized.push(student);
             progress(i + 1);
         }
         Ok(Self {

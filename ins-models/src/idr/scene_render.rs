@@ -14,6 +14,10 @@ use super::run::IdrRun;
 use crate::run::scene_render::{MeshOptions, PathFrame, RunMesh, SceneRender};
 
 impl SceneRender for IdrRun {
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+
     fn scene(&self) -> &Scene {
         &self.data
     }

@@ -6,7 +6,7 @@
 //! object, behind its surface. A stylization step that keeps the density reads it in the same
 //! rounds ([`geometry_until_opaque`]).
 
-use anyhow::Result;
+use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::render::occupancy::{MarchedSamples, OccupancyGrid};
 use ins_core::shape_buckets::{compiles_per_size, pad_rows, padded_size};
@@ -25,6 +25,18 @@ pub const INVISIBLE_TRANSMITTANCE: f32 = 1.0 / 512.0;
 /// Samples per ray in the first round; each round doubles it.
 const FIRST_ROUND: usize = 16;
 
+/// One way to colour a render's samples: `model`'s colour, under the style code `code`
+/// (`[1, n_styles]`) or unstylized, over `background`.
+#[derive(Clone)]
+pub struct Look<'a> {
+    /// The model whose colour (and stylizer) shades the samples.
+    pub model: &'a NerfModel,
+    /// Its style code, or `None` for its unstylized colour.
+    pub code: Option<Tensor<2>>,
+    /// What the light through a whole ray shows.
+    pub background: [f32; 3],
+}
+
 /// Colour `[R·3]`, expected distance `[R]` (not divided by the opacity) and opacity `[R]` of
 /// `rays` marched through `grid` (at most `max_per_ray` samples each, no jitter), under the
 /// style code `code` (`[1, n_styles]`) or unstylized; a ray stops once its transmittance is
@@ -40,11 +52,38 @@ pub fn render_early_stop(
     min_transmittance: f32,
     device: &Device,
 ) -> Result<(Vec<f32>, Vec<f32>, Vec<f32>)> {
+    let look = Look {
+        model,
+        code,
+        background,
+    };
+    let (mut rgb, depth, opacity) =
+        render_looks(&[look], rays, grid, max_per_ray, min_transmittance, device)?;
+    Ok((rgb.remove(0), depth, opacity))
+}
+
+/// [`render_early_stop`] of several looks at once, marched and composited with the density of
+/// the first look's model: each look's colour `[R·3]`, the distance and the opacity. Where the
+/// looks' models share their content module and keep its density (a stylized run and the
+/// pretrained run it kept the density of), this is each look's own render for one pass of
+/// the geometry: the pretrained frame beside each stylized one costs only its colour.
+pub fn render_looks(
+    looks: &[Look],
+    rays: &RenderRays,
+    grid: &OccupancyGrid,
+    max_per_ray: usize,
+    min_transmittance: f32,
+    device: &Device,
+) -> Result<(Vec<Vec<f32>>, Vec<f32>, Vec<f32>)> {
+    let model = looks.first().context("a render of no look")?.model;
     let r = rays.len();
-    let density_first = model.density_is_geometry();
+    let density_first = looks.iter().all(|l| l.model.density_is_geometry());
+    if looks.len() > 1 && !density_first {
+        bail!("looks rendered together must keep their content module's density");
+    }
     let m = grid.march(&rays.rays, max_per_ray, None);
     let mut transmittance = vec![1f32; r];
-    let mut rgb = vec![0f32; 3 * r];
+    let mut rgb = vec![vec![0f32; 3 * r]; looks.len()];
     let mut depth = vec![0f32; r];
     let mut cursor: Vec<usize> = m.offsets[..r].iter().map(|&o| o as usize).collect();
     let mut round = FIRST_ROUND;
@@ -63,8 +102,8 @@ pub fn render_early_stop(
             dirs.extend(rays.view_dirs[ray].to_array());
         }
         let points = Tensor::<1>::from_floats(x.as_slice(), device).reshape([n, 3]);
-        // `shaded[f]` is the sample whose colour is `colour`'s row `f`.
-        let (sigma, colour, shaded) = if density_first {
+        // `shaded[f]` is the sample whose colour is row `f` of each look's `colours`.
+        let (sigma, colours, shaded) = if density_first {
             // The density first; the stylizer and the colour only in front of where each
             // ray turns opaque (a stylized field's colour is most of a sample's cost).
             let (raw, features) = model.field.geometry.forward(points.clone());
@@ -84,21 +123,33 @@ pub fn render_early_stop(
                 .iter()
                 .flat_map(|&j| dirs[3 * j..3 * j + 3].iter().copied())
                 .collect();
-            let ev = model.shade(
+            let (x, raw, features) = (
                 points.select(0, rows.clone()),
                 raw.select(0, rows.clone()),
                 features.select(0, rows),
-                model.field.color.encode_dirs(&shaded_dirs, device),
-                code.clone(),
             );
-            (sigma, host(ev.rgb)?, shaded)
+            let colours = looks
+                .iter()
+                .map(|l| {
+                    let dirs = l.model.field.color.encode_dirs(&shaded_dirs, device);
+                    let ev = l.model.shade(
+                        x.clone(),
+                        raw.clone(),
+                        features.clone(),
+                        dirs,
+                        l.code.clone(),
+                    );
+                    host(ev.rgb)
+                })
+                .collect::<Result<Vec<_>>>()?;
+            (sigma, colours, shaded)
         } else {
             let ev = model.evaluate(
                 points,
                 model.field.color.encode_dirs(&dirs, device),
-                code.clone(),
+                looks[0].code.clone(),
             );
-            (host(ev.density)?, host(ev.rgb)?, (0..n).collect())
+            (host(ev.density)?, vec![host(ev.rgb)?], (0..n).collect())
         };
         // Samples of a ray are consecutive and in order along it.
         for (f, &j) in shaded.iter().enumerate() {
@@ -109,8 +160,10 @@ pub fn render_early_stop(
             }
             let alpha = 1.0 - (-sigma[j] * m.delta[k]).exp();
             let w = t_before * alpha;
-            for c in 0..3 {
-                rgb[3 * ray + c] += w * colour[3 * f + c];
+            for (rgb, colour) in rgb.iter_mut().zip(&colours) {
+                for c in 0..3 {
+                    rgb[3 * ray + c] += w * colour[3 * f + c];
+                }
             }
             depth[ray] += w * m.t[k];
             transmittance[ray] = t_before * (1.0 - alpha);
@@ -120,8 +173,10 @@ pub fn render_early_stop(
     let mut opacity = Vec::with_capacity(r);
     for ray in 0..r {
         let t = transmittance[ray];
-        for c in 0..3 {
-            rgb[3 * ray + c] += t * background[c];
+        for (rgb, look) in rgb.iter_mut().zip(looks) {
+            for c in 0..3 {
+                rgb[3 * ray + c] += t * look.background[c];
+            }
         }
         opacity.push(1.0 - t);
     }
@@ -244,6 +299,61 @@ mod tests {
             worst(&rgb, host(full.fine.rgb).unwrap()),
             worst(&opacity, host(full.fine.opacity).unwrap()),
         )
+    }
+
+    /// A pretrained field and its stylization that kept its density, rendered together: each
+    /// look is its own render (the geometry read once).
+    #[test]
+    fn looks_rendered_together_are_their_own_renders() {
+        let d = Device::flex();
+        let mut stylized = dense_kept_density(stylized_model(3, &d));
+        let pretrained = NerfModel {
+            stylizer: None,
+            ..stylized.clone()
+        };
+        // A stylizer that changes the colour (a fresh one is the identity).
+        let st = stylized.stylizer.as_mut().unwrap();
+        st.am.feature.gamma = Param::from_tensor(Tensor::from_floats([0.3], &d));
+        let grid = OccupancyGrid::new(16, Vec3::splat(-1.0), Vec3::splat(1.0), 0.03);
+        let rays = patch_rays(8);
+        let code = Tensor::<2>::from_floats([[0.0, 1.0]], &d);
+        let looks = [
+            Look {
+                model: &pretrained,
+                code: None,
+                background: [0.2; 3],
+            },
+            Look {
+                model: &stylized,
+                code: Some(code.clone()),
+                background: [0.7, 0.1, 0.3],
+            },
+        ];
+        let (rgb, depth, opacity) =
+            render_looks(&looks, &rays, &grid, 256, INVISIBLE_TRANSMITTANCE, &d).unwrap();
+        let worst = |a: &[f32], b: &[f32]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0f32, f32::max)
+        };
+        for (look, rgb) in looks.iter().zip(&rgb) {
+            let (want, want_depth, want_opacity) = render_early_stop(
+                look.model,
+                &rays,
+                &grid,
+                256,
+                look.code.clone(),
+                look.background,
+                INVISIBLE_TRANSMITTANCE,
+                &d,
+            )
+            .unwrap();
+            assert!(worst(rgb, &want) < 1e-6, "colour {}", worst(rgb, &want));
+            assert!(worst(&depth, &want_depth) < 1e-6 && worst(&opacity, &want_opacity) < 1e-6);
+        }
+        // The two looks differ: the stylizer ran for the second only.
+        assert!(worst(&rgb[0], &rgb[1]) > 1e-3);
     }
 
     /// The rounds keep exactly the samples (and their geometry) that every sample's density

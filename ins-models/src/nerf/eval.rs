@@ -13,7 +13,7 @@ use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::camera_rays;
 
-use super::early_stop::{INVISIBLE_TRANSMITTANCE, render_early_stop};
+use super::early_stop::{INVISIBLE_TRANSMITTANCE, Look, render_looks};
 use super::model::NerfModel;
 use super::render::{RenderRays, Sampling, render};
 
@@ -107,7 +107,8 @@ pub fn depth_agreement(student: &ViewRender, teacher: &ViewRender) -> DepthAgree
 }
 
 /// Renders `rays` (an image's rays, row major) in chunks of [`CHUNK`] with a fixed sampling
-/// (no jitter); marched rays stop once opaque ([`render_early_stop`]). `code` is one style code `[1, n_styles]` or `None` for the unstylized field.
+/// (no jitter); marched rays stop once opaque
+/// ([`render_early_stop`](super::early_stop::render_early_stop)). `code` is one style code `[1, n_styles]` or `None` for the unstylized field.
 #[allow(clippy::too_many_arguments)]
 pub fn render_rays(
     model: &NerfModel,
@@ -119,14 +120,36 @@ pub fn render_rays(
     background: [f32; 3],
     device: &Device,
 ) -> Result<ViewRender> {
-    let n = rays.len();
-    let mut out = ViewRender {
-        width,
-        height,
-        rgb: Vec::with_capacity(n * 3),
-        depth: Vec::with_capacity(n),
-        opacity: Vec::with_capacity(n),
+    let look = Look {
+        model,
+        code,
+        background,
     };
+    let mut views = render_rays_looks(&[look], rays, width, height, sampling, device)?;
+    Ok(views.remove(0))
+}
+
+/// [`render_rays`] of several looks: marched, they share one pass of the first look's
+/// geometry ([`render_looks`]); sampled coarse to fine, each is rendered on its own.
+pub fn render_rays_looks(
+    looks: &[Look],
+    rays: &RenderRays,
+    width: usize,
+    height: usize,
+    sampling: Sampling,
+    device: &Device,
+) -> Result<Vec<ViewRender>> {
+    let n = rays.len();
+    let mut out: Vec<ViewRender> = looks
+        .iter()
+        .map(|_| ViewRender {
+            width,
+            height,
+            rgb: Vec::with_capacity(n * 3),
+            depth: Vec::with_capacity(n),
+            opacity: Vec::with_capacity(n),
+        })
+        .collect();
     let mut start = 0;
     while start < n {
         let end = (start + CHUNK).min(n);
@@ -135,32 +158,34 @@ pub fn render_rays(
             grid, max_per_ray, ..
         } = sampling
         {
-            let (rgb, depth, opacity) = render_early_stop(
-                model,
+            let (rgb, depth, opacity) = render_looks(
+                looks,
                 &chunk,
                 grid,
                 max_per_ray,
-                code.clone(),
-                background,
                 INVISIBLE_TRANSMITTANCE,
                 device,
             )?;
-            out.rgb.extend(rgb);
-            out.depth.extend(depth);
-            out.opacity.extend(opacity);
+            for (view, rgb) in out.iter_mut().zip(rgb) {
+                view.rgb.extend(rgb);
+                view.depth.extend_from_slice(&depth);
+                view.opacity.extend_from_slice(&opacity);
+            }
         } else {
-            let r = render(
-                model,
-                &chunk,
-                sampling,
-                code.clone(),
-                background,
-                None,
-                device,
-            );
-            out.rgb.extend(to_vec(r.fine.rgb)?);
-            out.depth.extend(to_vec(r.fine.depth)?);
-            out.opacity.extend(to_vec(r.fine.opacity)?);
+            for (view, look) in out.iter_mut().zip(looks) {
+                let r = render(
+                    look.model,
+                    &chunk,
+                    sampling,
+                    look.code.clone(),
+                    look.background,
+                    None,
+                    device,
+                );
+                view.rgb.extend(to_vec(r.fine.rgb)?);
+                view.depth.extend(to_vec(r.fine.depth)?);
+                view.opacity.extend(to_vec(r.fine.opacity)?);
+            }
         }
         start = end;
     }
@@ -177,15 +202,30 @@ pub fn render_camera(
     background: [f32; 3],
     device: &Device,
 ) -> Result<ViewRender> {
-    let rays = RenderRays::for_scene(scene, camera_rays(camera, |o, d| scene.ray_range(o, d)));
-    render_rays(
+    let look = Look {
         model,
+        code,
+        background,
+    };
+    let mut views = render_camera_looks(&[look], scene, camera, sampling, device)?;
+    Ok(views.remove(0))
+}
+
+/// [`render_camera`] of several looks ([`render_rays_looks`]).
+pub fn render_camera_looks(
+    looks: &[Look],
+    scene: &Scene,
+    camera: &Camera,
+    sampling: Sampling,
+    device: &Device,
+) -> Result<Vec<ViewRender>> {
+    let rays = RenderRays::for_scene(scene, camera_rays(camera, |o, d| scene.ray_range(o, d)));
+    render_rays_looks(
+        looks,
         &rays,
         camera.width as usize,
         camera.height as usize,
         sampling,
-        code,
-        background,
         device,
     )
 }

@@ -3,6 +3,7 @@
 //! (what `export mesh` writes). [`super::any::AnyRun`] hands a run out as a
 //! `Box<dyn SceneRender>`.
 
+use std::any::Any;
 use std::path::Path;
 
 use anyhow::Result;
@@ -107,4 +108,22 @@ pub trait SceneRender: RunInfo {
         code: Option<Tensor<2>>,
         device: &Device,
     ) -> Result<RunMesh>;
+    /// The run as `Any`, so that a variant can tell a run of its own kind
+    /// ([`Self::frame_pair`]).
+    fn as_any(&self) -> &dyn Any;
+    /// What `camera` sees from `base` unstylized (the pretrained run this run started from)
+    /// and from this run under `code`. Two renders, unless the variant can share the work: a
+    /// NeRF stylized with its base's density kept renders the geometry once for both.
+    fn frame_pair(
+        &self,
+        base: &dyn SceneRender,
+        camera: &Camera,
+        code: Option<Tensor<2>>,
+        device: &Device,
+    ) -> Result<(PathFrame, PathFrame)> {
+        Ok((
+            base.frame(camera, None, device)?,
+            self.frame(camera, code, device)?,
+        ))
+    }
 }
