@@ -191,8 +191,8 @@ impl NerfModel {
     /// code of `codes [S, n_styles]` (or unstylized when `None` or without a stylizer). The
     /// content module runs once; only SIM, AM and colour run per style.
     pub fn evaluate(&self, x: Tensor<2>, dirs: Tensor<2>, codes: Option<Tensor<2>>) -> Evaluated {
-        let (raw, features) = self.field.geometry.forward(x.clone());
-        self.stylized(x, raw, features, dirs, codes, false)
+        let geometry = self.field.geometry.forward(x.clone());
+        self.stylized(x, geometry, dirs, codes, false)
     }
 
     /// [`Self::evaluate`] past the content module, for a field whose density is the content
@@ -208,15 +208,15 @@ impl NerfModel {
         dirs: Tensor<2>,
         codes: Option<Tensor<2>>,
     ) -> Evaluated {
-        self.stylized(x, raw, features, dirs, codes, true)
+        self.stylized(x, (raw, features), dirs, codes, true)
     }
 
-    /// [`Self::evaluate`] from the geometry's outputs; `kept_density`: see [`Self::shade`].
+    /// [`Self::evaluate`] from the geometry's outputs (raw density, features); `kept_density`:
+    /// see [`Self::shade`].
     fn stylized(
         &self,
         x: Tensor<2>,
-        raw: Tensor<1>,
-        features: Tensor<2>,
+        (raw, features): (Tensor<1>, Tensor<2>),
         dirs: Tensor<2>,
         codes: Option<Tensor<2>>,
         kept_density: bool,
