@@ -59,20 +59,21 @@ fn shares_geometry(a: &NerfRun, b: &NerfRun) -> bool {
         && same_values(&a.model.field.geometry, &b.model.field.geometry)
 }
 
-/// Whether two modules of one kind hold the same parameter values.
+/// Whether two modules of one kind hold the same parameter values (a value that cannot be
+/// read counts as different).
 fn same_values<M: Module>(a: &M, b: &M) -> bool {
     #[derive(Default)]
-    struct Values(Vec<Vec<f32>>);
+    struct Values(Vec<Option<Vec<f32>>>);
     impl ModuleVisitor for Values {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
             let data = param.val().into_data().convert::<f32>();
-            self.0.push(data.try_to_vec::<f32>().unwrap_or_default());
+            self.0.push(data.try_to_vec::<f32>().ok());
         }
     }
     let (mut va, mut vb) = (Values::default(), Values::default());
     a.visit(&mut va);
     b.visit(&mut vb);
-    va.0 == vb.0
+    va.0.iter().all(Option::is_some) && va.0 == vb.0
 }
 
 impl SceneRender for NerfRun {
