@@ -62,6 +62,9 @@ pub fn render_early_stop(
     Ok((rgb.remove(0), depth, opacity))
 }
 
+/// Each look's colour `[R·3]`, then the shared distance `[R]` and opacity `[R]`.
+pub type LooksRender = (Vec<Vec<f32>>, Vec<f32>, Vec<f32>);
+
 /// [`render_early_stop`] of several looks at once, marched and composited with the density of
 /// the first look's model: each look's colour `[R·3]`, the distance and the opacity. Where the
 /// looks' models share their content module and keep its density (a stylized run and the
@@ -74,7 +77,7 @@ pub fn render_looks(
     max_per_ray: usize,
     min_transmittance: f32,
     device: &Device,
-) -> Result<(Vec<Vec<f32>>, Vec<f32>, Vec<f32>)> {
+) -> Result<LooksRender> {
     let model = looks.first().context("a render of no look")?.model;
     let r = rays.len();
     let density_first = looks.iter().all(|l| l.model.density_is_geometry());
