@@ -122,6 +122,74 @@ pub fn scatter_level(
     unreachable!()
 }
 
+/// The spatial Jacobian rows (`L·2·3` each, the axes last) of the first `16·⌊m/16⌋` points of
+/// `columns` into `jac` (`m` rows), as `kernel::jacobian` sums them before it zeroes clamped
+/// axes; returns how many points it wrote.
+///
+/// # Panics
+/// Unless [`usable`] holds for the layout, or if a slice is short.
+pub fn jacobian_points(layout: &Layout, table: &[f32], columns: &[f32], jac: &mut [f32]) -> usize {
+    assert!(
+        usable(layout.features),
+        "the vector hash-grid loops need AVX-512 F and 2 features"
+    );
+    let m = columns.len() / 3;
+    assert!(
+        jac.len() >= m * layout.levels() * 6,
+        "jacobian_points: output too short"
+    );
+    assert!(
+        table.len() >= 2 * layout.total_rows(),
+        "jacobian_points: table too short"
+    );
+    assert!(
+        layout.total_rows() < i32::MAX as usize,
+        "jacobian_points: table rows beyond i32"
+    );
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: as `encode_level`.
+    unsafe {
+        jacobian(layout, table, columns, m, jac)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!()
+}
+
+/// Adds level `l`'s table gradient from the Jacobian's upstream gradient `grad_jac` (`m` rows
+/// of `L·2·3`) for the first `16·⌊m/16⌋` points into `grad` (the level's own rows), in
+/// `kernel::jacobian_backward_table`'s order; returns how many points it took.
+///
+/// # Panics
+/// Unless [`usable`] holds for the layout, or if a slice is short.
+pub fn jacobian_scatter_level(
+    layout: &Layout,
+    l: usize,
+    columns: &[f32],
+    grad_jac: &[f32],
+    grad: &mut [f32],
+) -> usize {
+    assert!(
+        usable(layout.features),
+        "the vector hash-grid loops need AVX-512 F and 2 features"
+    );
+    let m = columns.len() / 3;
+    assert!(
+        grad_jac.len() >= m * layout.levels() * 6,
+        "jacobian_scatter_level: gradient too short"
+    );
+    assert!(
+        grad.len() >= 2 * layout.rows[l],
+        "jacobian_scatter_level: level gradient too short"
+    );
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: as `scatter_level`.
+    unsafe {
+        jacobian_scatter(layout, l, columns, m, grad_jac, grad)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!()
+}
+
 /// Level constants, broadcast.
 #[cfg(target_arch = "x86_64")]
 struct Level {
@@ -150,38 +218,31 @@ impl Level {
         }
     }
 
-    /// The eight corners of points `i .. i + 16`: rows relative to the level and trilinear
-    /// weights, computed as `Layout::corner_weights` computes them.
+    /// The cells of points `i .. i + 16`: lower corners and fractions, as `Layout::cell`.
     #[inline]
     #[target_feature(enable = "avx512f")]
-    unsafe fn corners(&self, columns: &[f32], m: usize, i: usize) -> ([__m512i; 8], [__m512; 8]) {
+    unsafe fn cells(&self, columns: &[f32], m: usize, i: usize) -> ([__m512i; 3], [__m512; 3]) {
         let zero = _mm512_setzero_ps();
-        let one = _mm512_set1_ps(1.0);
         let mut cell = [_mm512_setzero_si512(); 3];
         let mut f = [zero; 3];
         for k in 0..3 {
             // SAFETY: i + 16 ≤ m, and columns holds 3·m values.
             let p = unsafe { _mm512_loadu_ps(columns.as_ptr().add(k * m + i)) };
-            let x = _mm512_mul_ps(_mm512_min_ps(_mm512_max_ps(p, zero), one), self.scale);
+            let x = _mm512_mul_ps(
+                _mm512_min_ps(_mm512_max_ps(p, zero), _mm512_set1_ps(1.0)),
+                self.scale,
+            );
             cell[k] = _mm512_min_epu32(_mm512_cvttps_epu32(x), self.last_cell);
             f[k] = _mm512_sub_ps(x, _mm512_cvtepu32_ps(cell[k]));
         }
-        let g = [
-            _mm512_sub_ps(one, f[0]),
-            _mm512_sub_ps(one, f[1]),
-            _mm512_sub_ps(one, f[2]),
-        ];
-        // (x-factor · y-factor) · z-factor, the scalar loop's order.
-        let xy = [
-            _mm512_mul_ps(g[0], g[1]),
-            _mm512_mul_ps(f[0], g[1]),
-            _mm512_mul_ps(g[0], f[1]),
-            _mm512_mul_ps(f[0], f[1]),
-        ];
-        let weights = std::array::from_fn(|c| {
-            _mm512_mul_ps(xy[c & 3], if c >> 2 == 1 { f[2] } else { g[2] })
-        });
-        let rows = if self.dense {
+        (cell, f)
+    }
+
+    /// The eight corner rows of `cell`, relative to the level, as `Layout::cell_rows`.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn rows(&self, cell: [__m512i; 3]) -> [__m512i; 8] {
+        if self.dense {
             let base = _mm512_add_epi32(
                 _mm512_add_epi32(cell[0], _mm512_mullo_epi32(cell[1], self.side_v)),
                 _mm512_mullo_epi32(cell[2], self.plane_v),
@@ -193,19 +254,19 @@ impl Level {
                 _mm512_add_epi32(base, _mm512_set1_epi32(step as i32))
             })
         } else {
-            let one_i = _mm512_set1_epi32(1);
+            let one = _mm512_set1_epi32(1);
             let (py, pz) = (
                 _mm512_set1_epi32(2_654_435_761_u32 as i32),
                 _mm512_set1_epi32(805_459_861),
             );
-            let hx = [cell[0], _mm512_add_epi32(cell[0], one_i)];
+            let hx = [cell[0], _mm512_add_epi32(cell[0], one)];
             let hy = [
                 _mm512_mullo_epi32(cell[1], py),
-                _mm512_mullo_epi32(_mm512_add_epi32(cell[1], one_i), py),
+                _mm512_mullo_epi32(_mm512_add_epi32(cell[1], one), py),
             ];
             let hz = [
                 _mm512_mullo_epi32(cell[2], pz),
-                _mm512_mullo_epi32(_mm512_add_epi32(cell[2], one_i), pz),
+                _mm512_mullo_epi32(_mm512_add_epi32(cell[2], one), pz),
             ];
             std::array::from_fn(|c| {
                 let h = _mm512_xor_si512(
@@ -214,8 +275,52 @@ impl Level {
                 );
                 _mm512_and_si512(h, self.mask)
             })
-        };
-        (rows, weights)
+        }
+    }
+
+    /// The trilinear weights of fractions `f`: (x-factor · y-factor) · z-factor, the scalar
+    /// loop's order.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn weights(f: [__m512; 3]) -> [__m512; 8] {
+        let one = _mm512_set1_ps(1.0);
+        let g = [
+            _mm512_sub_ps(one, f[0]),
+            _mm512_sub_ps(one, f[1]),
+            _mm512_sub_ps(one, f[2]),
+        ];
+        let xy = [
+            _mm512_mul_ps(g[0], g[1]),
+            _mm512_mul_ps(f[0], g[1]),
+            _mm512_mul_ps(g[0], f[1]),
+            _mm512_mul_ps(f[0], f[1]),
+        ];
+        std::array::from_fn(|c| _mm512_mul_ps(xy[c & 3], if c >> 2 == 1 { f[2] } else { g[2] }))
+    }
+
+    /// The weights' derivatives along each axis, as `Layout::corners` computes them.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    fn slopes(&self, f: [__m512; 3]) -> [[__m512; 3]; 8] {
+        let one = _mm512_set1_ps(1.0);
+        let minus = _mm512_sub_ps(_mm512_setzero_ps(), self.scale);
+        std::array::from_fn(|c| {
+            let b = [c & 1, (c >> 1) & 1, (c >> 2) & 1];
+            let t: [__m512; 3] = std::array::from_fn(|k| {
+                if b[k] == 1 {
+                    f[k]
+                } else {
+                    _mm512_sub_ps(one, f[k])
+                }
+            });
+            let s: [__m512; 3] =
+                std::array::from_fn(|k| if b[k] == 1 { self.scale } else { minus });
+            [
+                _mm512_mul_ps(_mm512_mul_ps(s[0], t[1]), t[2]),
+                _mm512_mul_ps(_mm512_mul_ps(t[0], s[1]), t[2]),
+                _mm512_mul_ps(_mm512_mul_ps(t[0], t[1]), s[2]),
+            ]
+        })
     }
 }
 
@@ -238,7 +343,8 @@ unsafe fn encode(
     let full = m / LANES * LANES;
     for i in (0..full).step_by(LANES) {
         // SAFETY: see `encode_level`.
-        let (rows, weights) = unsafe { level.corners(columns, m, i) };
+        let (cell, f) = unsafe { level.cells(columns, m, i) };
+        let (rows, weights) = (level.rows(cell), Level::weights(f));
         let (mut lo, mut hi) = (_mm512_setzero_ps(), _mm512_setzero_ps());
         for c in 0..8 {
             let r = _mm512_add_epi32(rows[c], offset);
@@ -286,7 +392,8 @@ unsafe fn scatter(
     let mut weights = [[0f32; LANES]; 8];
     for i in (0..full).step_by(LANES) {
         // SAFETY: see `scatter_level`.
-        let (r, w) = unsafe { level.corners(columns, m, i) };
+        let (cell, f) = unsafe { level.cells(columns, m, i) };
+        let (r, w) = (level.rows(cell), Level::weights(f));
         for c in 0..8 {
             // SAFETY: 16 lanes into arrays of 16.
             unsafe {
@@ -310,9 +417,133 @@ unsafe fn scatter(
     full
 }
 
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn jacobian(
+    layout: &Layout,
+    table: &[f32],
+    columns: &[f32],
+    m: usize,
+    jac: &mut [f32],
+) -> usize {
+    let levels: Vec<Level> = (0..layout.levels())
+        .map(|l| Level::new(layout, l))
+        .collect();
+    let width = layout.levels() * 6;
+    // Pairs (a, b) of 8 points each → the 16 a's and the 16 b's.
+    let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+    let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+    let pairs = table.as_ptr() as *const f64;
+    let mut block = [[0f32; LANES]; 6];
+    let full = m / LANES * LANES;
+    for i in (0..full).step_by(LANES) {
+        for (l, level) in levels.iter().enumerate() {
+            // SAFETY: see `jacobian_points`.
+            let (cell, f) = unsafe { level.cells(columns, m, i) };
+            let (rows, slopes) = (level.rows(cell), level.slopes(f));
+            let offset = _mm512_set1_epi32(layout.offset[l] as i32);
+            let mut acc = [_mm512_setzero_ps(); 6];
+            for c in 0..8 {
+                let r = _mm512_add_epi32(rows[c], offset);
+                // SAFETY: every row is below total_rows.
+                let (lo, hi) = unsafe {
+                    (
+                        _mm512_castpd_ps(_mm512_i32gather_pd::<8>(
+                            _mm512_castsi512_si256(r),
+                            pairs,
+                        )),
+                        _mm512_castpd_ps(_mm512_i32gather_pd::<8>(
+                            _mm512_extracti64x4_epi64::<1>(r),
+                            pairs,
+                        )),
+                    )
+                };
+                let feature = [
+                    _mm512_permutex2var_ps(lo, even, hi),
+                    _mm512_permutex2var_ps(lo, odd, hi),
+                ];
+                for (fi, t) in feature.iter().enumerate() {
+                    for k in 0..3 {
+                        let a = &mut acc[fi * 3 + k];
+                        *a = _mm512_add_ps(*a, _mm512_mul_ps(slopes[c][k], *t));
+                    }
+                }
+            }
+            for (dst, a) in block.iter_mut().zip(acc) {
+                // SAFETY: 16 lanes into an array of 16.
+                unsafe { _mm512_storeu_ps(dst.as_mut_ptr(), a) };
+            }
+            for j in 0..LANES {
+                let row = &mut jac[(i + j) * width + l * 6..(i + j) * width + l * 6 + 6];
+                for (e, v) in row.iter_mut().enumerate() {
+                    *v = block[e][j];
+                }
+            }
+        }
+    }
+    full
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn jacobian_scatter(
+    layout: &Layout,
+    l: usize,
+    columns: &[f32],
+    m: usize,
+    grad_jac: &[f32],
+    grad: &mut [f32],
+) -> usize {
+    let level = Level::new(layout, l);
+    let width = layout.levels() * 6;
+    let (zero, one) = (_mm512_setzero_ps(), _mm512_set1_ps(1.0));
+    let mut rows = [[0u32; LANES]; 8];
+    let mut slopes = [[[0f32; LANES]; 3]; 8];
+    let full = m / LANES * LANES;
+    for i in (0..full).step_by(LANES) {
+        // SAFETY: see `jacobian_scatter_level`.
+        let (cell, f) = unsafe { level.cells(columns, m, i) };
+        let (r, s) = (level.rows(cell), level.slopes(f));
+        // A clamped axis does not move the encoding: its slopes count as 0.
+        let inside: [__m512; 3] = std::array::from_fn(|k| {
+            // SAFETY: i + 16 ≤ m.
+            let p = unsafe { _mm512_loadu_ps(columns.as_ptr().add(k * m + i)) };
+            let within = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(p, zero)
+                & _mm512_cmp_ps_mask::<_CMP_LE_OQ>(p, one);
+            _mm512_mask_blend_ps(within, zero, one)
+        });
+        for c in 0..8 {
+            // SAFETY: 16 lanes into arrays of 16.
+            unsafe {
+                _mm512_storeu_si512(rows[c].as_mut_ptr().cast(), r[c]);
+                for k in 0..3 {
+                    _mm512_storeu_ps(slopes[c][k].as_mut_ptr(), _mm512_mul_ps(s[c][k], inside[k]));
+                }
+            }
+        }
+        for j in 0..LANES {
+            let g = &grad_jac[(i + j) * width + l * 6..(i + j) * width + l * 6 + 6];
+            for c in 0..8 {
+                let r = rows[c][j] as usize * 2;
+                for fi in 0..2 {
+                    // `Iterator::sum`'s order: from -0.0, axis after axis.
+                    let mut t = -0.0f32;
+                    for k in 0..3 {
+                        t += slopes[c][k][j] * g[fi * 3 + k];
+                    }
+                    grad[r + fi] += t;
+                }
+            }
+        }
+    }
+    full
+}
+
 #[cfg(test)]
 mod tests {
-    use super::super::kernel::{GridShape, backward_table, forward};
+    use super::super::kernel::{
+        GridShape, backward_table, forward, jacobian, jacobian_backward_table,
+    };
     use super::*;
 
     /// Dense and hashed levels; 16·62 + 7 points (a ragged tail), some outside the unit cube
@@ -397,6 +628,60 @@ mod tests {
             let mut dst = vec![0f32; 2 * n];
             assert_eq!(
                 encode_level(&layout, 3, &table, &columns, &mut dst),
+                16 * 62
+            );
+        }
+    }
+
+    #[test]
+    fn the_jacobian_sixteen_points_at_a_time_gives_the_scalar_loops_bits() {
+        let (layout, table, positions) = case();
+        let n = positions.len() / 3;
+        let width = layout.levels() * 6;
+        let mut jac = vec![0f32; n * width];
+        jacobian(&layout, &table, &positions, &mut jac);
+        let grad_jac: Vec<f32> = (0..n * width)
+            .map(|i| ((i * 5) % 17) as f32 / 8.0 - 1.0)
+            .collect();
+        let mut grad = vec![0f32; table.len()];
+        jacobian_backward_table(&layout, &positions, &grad_jac, &mut grad);
+        // The scalar arithmetic, one point after another.
+        let mut want_grad = vec![0f32; table.len()];
+        for (i, p) in positions.chunks_exact(3).enumerate() {
+            let p = [p[0], p[1], p[2]];
+            let inside = p.map(|v| if (0.0..=1.0).contains(&v) { 1.0 } else { 0.0 });
+            for l in 0..layout.levels() {
+                let (rows, _, dw) = layout.corners(l, p);
+                let mut want = [0f32; 6];
+                for c in 0..8 {
+                    for fi in 0..2 {
+                        let mut t = -0.0f32;
+                        for k in 0..3 {
+                            want[fi * 3 + k] += dw[c][k] * table[rows[c] * 2 + fi];
+                            t += dw[c][k] * inside[k] * grad_jac[i * width + l * 6 + fi * 3 + k];
+                        }
+                        want_grad[rows[c] * 2 + fi] += t;
+                    }
+                }
+                for (e, w) in want.iter().enumerate() {
+                    let w = if inside[e % 3] == 1.0 { *w } else { 0.0 };
+                    let got = jac[i * width + l * 6 + e];
+                    assert_eq!(
+                        got.to_bits(),
+                        w.to_bits(),
+                        "point {i}, level {l}, entry {e}: {got} vs {w}"
+                    );
+                }
+            }
+        }
+        for (k, (g, w)) in grad.iter().zip(&want_grad).enumerate() {
+            assert_eq!(g.to_bits(), w.to_bits(), "table gradient {k}: {g} vs {w}");
+        }
+        if cpu_has_avx512f() {
+            let columns = columns(&positions);
+            let mut rows = vec![0f32; n * width];
+            assert_eq!(
+                jacobian_points(&layout, &table, &columns, &mut rows),
                 16 * 62
             );
         }
