@@ -9,7 +9,9 @@
 //! `ins-conv`'s op (f32 engine, with and without its fused ReLU: its BF16 engines are never
 //! picked on these CPUs); the SIREN's `sin(ω·z)` op, the SDF networks' softplus and slope ops and
 //! Adam's update, whose AVX-512 loops the emulated CPUs run 8 lanes wide (Haswell) or 4 (Nehalem),
-//! bit for bit the same; and the Gram-matrix op.
+//! bit for bit the same; the hash grid's lookup, Jacobian and both table gradients, whose
+//! AVX-512 loops the emulated CPUs replace by the scalar ones, bit for bit the same; and the
+//! Gram-matrix op.
 //!
 //! A test binary without the libtest harness (`harness = false`): run with the environment
 //! variable below, it is the child that computes and writes its numbers.
@@ -25,6 +27,8 @@ use ins_conv::Engine;
 use ins_conv::op::ConvParams;
 use ins_core::kernels::adam::kernel::{Step, update as adam_update};
 use ins_core::kernels::gram::gram_flex;
+use ins_core::kernels::hash_grid::GridShape;
+use ins_core::kernels::hash_grid::kernel as grid;
 use ins_core::kernels::sine::scaled_sin;
 use ins_core::kernels::softplus::{softplus, softplus_slope};
 use ins_tests::{max_rel_diff, values};
@@ -43,8 +47,9 @@ const CPUS: &[(&str, &[&str], &[&str])] = &[
 /// Kernels agree to rounding: different kernels sum in different orders.
 const TOLERANCE: f32 = 1e-4;
 /// The element-wise kernels (sine, softplus, Adam), compiled once per vector width from one
-/// loop, agree exactly: the same arithmetic in the same order, whatever the width.
-const ELEMENT_WISE: &[&str] = &["sine", "softplus", "adam"];
+/// loop, and the hash grid (16 points at a time with AVX-512, one at a time without) agree
+/// exactly: the same arithmetic in the same order, whatever the width.
+const ELEMENT_WISE: &[&str] = &["sine", "softplus", "adam", "hash_grid"];
 
 type Results = BTreeMap<String, Vec<f32>>;
 
@@ -237,6 +242,7 @@ fn compute() -> Results {
     out.insert("adam_naive".into(), naive);
     out.insert("adam_moments".into(), [m, v].concat());
     out.insert("adam_moments_naive".into(), [naive_m, naive_v].concat());
+    hash_grid(&mut rng, &mut out);
     // The Gram matrix of a [1, 19, 130] feature map and its gradient.
     let (c, p) = (19, 130);
     let f = random(&mut rng, c * p);
@@ -252,6 +258,68 @@ fn compute() -> Results {
         values(ft.grad(&grads).expect("Gram gradient")),
     );
     out
+}
+
+/// The hash grid's kernels on a grid with dense and hashed levels, at 16·40 + 5 points (some
+/// outside the unit cube), and its lookup and Jacobian again one point at a time from the
+/// corner weights.
+fn hash_grid(rng: &mut SmallRng, out: &mut Results) {
+    let layout = GridShape {
+        levels: 5,
+        features: 2,
+        log2_table: 9,
+        base_resolution: 3,
+        max_resolution: 40,
+    }
+    .layout();
+    let table = random(rng, layout.total_rows() * 2);
+    let n = 16 * 40 + 5;
+    let positions: Vec<f32> = random(rng, n * 3).iter().map(|v| v * 0.6 + 0.5).collect();
+    let width = layout.levels() * 2;
+    let mut encoded = vec![0f32; n * width];
+    grid::forward(&layout, &table, &positions, &mut encoded);
+    let mut naive = vec![0f32; n * width];
+    for (i, p) in positions.chunks_exact(3).enumerate() {
+        for l in 0..layout.levels() {
+            let (rows, w) = layout.corner_weights(l, p);
+            for f in 0..2 {
+                naive[i * width + l * 2 + f] = (0..8).map(|c| w[c] * table[rows[c] * 2 + f]).sum();
+            }
+        }
+    }
+    let upstream = random(rng, n * width);
+    let mut grad = vec![0f32; table.len()];
+    grid::backward_table(&layout, &positions, &upstream, &mut grad);
+    let mut jacobian = vec![0f32; n * width * 3];
+    grid::jacobian(&layout, &table, &positions, &mut jacobian);
+    let upstream = random(rng, n * width * 3);
+    let mut jacobian_grad = vec![0f32; table.len()];
+    grid::jacobian_backward_table(&layout, &positions, &upstream, &mut jacobian_grad);
+    out.insert("hash_grid".into(), encoded);
+    out.insert("hash_grid_naive".into(), naive);
+    out.insert("hash_grid_table_grad".into(), grad);
+    let mut naive_jacobian = vec![0f32; n * width * 3];
+    for (i, p) in positions.chunks_exact(3).enumerate() {
+        let p = [p[0], p[1], p[2]];
+        for l in 0..layout.levels() {
+            let (rows, _, dw) = layout.corners(l, p);
+            for (e, v) in naive_jacobian[(i * width + l * 2) * 3..][..6]
+                .iter_mut()
+                .enumerate()
+            {
+                let (f, k) = (e / 3, e % 3);
+                let inside = (0.0..=1.0).contains(&p[k]);
+                *v = if inside {
+                    (0..8).map(|c| dw[c][k] * table[rows[c] * 2 + f]).sum()
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
+    out.insert("hash_grid_jacobian".into(), jacobian);
+    out.insert("hash_grid_jacobian_naive".into(), naive_jacobian);
+    out.insert("hash_grid_jacobian_grad_table".into(), jacobian_grad);
 }
 
 /// `[rows, cols]` → `[cols, rows]`.
