@@ -1,11 +1,12 @@
-//! The hash encoding's two hottest loops, a level's lookup and its table gradient, sixteen
-//! points at a time with AVX-512, for grids of two features a level (every grid the product
-//! builds).
+//! The hash encoding's hottest loops (a level's lookup, its table gradient, the spatial
+//! Jacobian and the Jacobian's table gradient) sixteen points at a time with AVX-512, for grids
+//! of two features a level (every grid the product builds).
 //!
-//! Pretraining a NeRF spent about 40 % of a step in these loops one point at a time (corner
-//! hashing, weights and 16 scalar loads per point and level). Here the cell, the eight
-//! weights and the eight rows are computed for 16 points in vector registers and each corner's
-//! feature pairs are fetched with two 64-bit gathers. The arithmetic is the scalar loops'
+//! These loops were about 40 % of a NeRF pretraining step and of an IDR surface step, one point
+//! at a time (corner hashing, weights and 16 scalar loads per point and level). Here the cell,
+//! the eight weights (or their slopes) and the eight rows are computed for 16 points in vector
+//! registers and each corner's feature pairs are fetched with two 64-bit gathers; the
+//! gradients' adds stay one point after another. The arithmetic is the scalar loops'
 //! (`super::kernel`), operation for operation, so results are bit-identical; those loops stay
 //! for other CPUs, other feature counts and the last `m mod 16` points.
 
@@ -57,24 +58,8 @@ pub fn encode_level(
     columns: &[f32],
     dst: &mut [f32],
 ) -> usize {
-    assert!(
-        usable(layout.features),
-        "the vector hash-grid loops need AVX-512 F and 2 features"
-    );
-    let m = columns.len() / 3;
-    assert!(
-        dst.len() >= 2 * m,
-        "encode_level: output of {} for {m} points",
-        dst.len()
-    );
-    assert!(
-        table.len() >= 2 * layout.total_rows(),
-        "encode_level: table too short"
-    );
-    assert!(
-        layout.total_rows() < i32::MAX as usize,
-        "encode_level: table rows beyond i32"
-    );
+    let m = points("encode_level", layout, columns, 2, dst.len());
+    table_covers("encode_level", layout, table);
     #[cfg(target_arch = "x86_64")]
     // SAFETY: AVX-512 F is present (`usable`), and the slices are as long as checked above;
     // every row a gather reads is below `total_rows` (the level's rows are masked or bounded
@@ -99,20 +84,8 @@ pub fn scatter_level(
     grad_level: &[f32],
     grad: &mut [f32],
 ) -> usize {
-    assert!(
-        usable(layout.features),
-        "the vector hash-grid loops need AVX-512 F and 2 features"
-    );
-    let m = columns.len() / 3;
-    assert!(
-        grad_level.len() >= 2 * m,
-        "scatter_level: gradient of {} for {m} points",
-        grad_level.len()
-    );
-    assert!(
-        grad.len() >= 2 * layout.rows[l],
-        "scatter_level: level gradient too short"
-    );
+    let m = points("scatter_level", layout, columns, 2, grad_level.len());
+    level_covered("scatter_level", layout, l, grad);
     #[cfg(target_arch = "x86_64")]
     // SAFETY: as `encode_level`; rows are relative to the level and below `rows[l]`.
     unsafe {
@@ -129,23 +102,14 @@ pub fn scatter_level(
 /// # Panics
 /// Unless [`usable`] holds for the layout, or if a slice is short.
 pub fn jacobian_points(layout: &Layout, table: &[f32], columns: &[f32], jac: &mut [f32]) -> usize {
-    assert!(
-        usable(layout.features),
-        "the vector hash-grid loops need AVX-512 F and 2 features"
+    let m = points(
+        "jacobian_points",
+        layout,
+        columns,
+        layout.levels() * 6,
+        jac.len(),
     );
-    let m = columns.len() / 3;
-    assert!(
-        jac.len() >= m * layout.levels() * 6,
-        "jacobian_points: output too short"
-    );
-    assert!(
-        table.len() >= 2 * layout.total_rows(),
-        "jacobian_points: table too short"
-    );
-    assert!(
-        layout.total_rows() < i32::MAX as usize,
-        "jacobian_points: table rows beyond i32"
-    );
+    table_covers("jacobian_points", layout, table);
     #[cfg(target_arch = "x86_64")]
     // SAFETY: as `encode_level`.
     unsafe {
@@ -168,19 +132,14 @@ pub fn jacobian_scatter_level(
     grad_jac: &[f32],
     grad: &mut [f32],
 ) -> usize {
-    assert!(
-        usable(layout.features),
-        "the vector hash-grid loops need AVX-512 F and 2 features"
+    let m = points(
+        "jacobian_scatter_level",
+        layout,
+        columns,
+        layout.levels() * 6,
+        grad_jac.len(),
     );
-    let m = columns.len() / 3;
-    assert!(
-        grad_jac.len() >= m * layout.levels() * 6,
-        "jacobian_scatter_level: gradient too short"
-    );
-    assert!(
-        grad.len() >= 2 * layout.rows[l],
-        "jacobian_scatter_level: level gradient too short"
-    );
+    level_covered("jacobian_scatter_level", layout, l, grad);
     #[cfg(target_arch = "x86_64")]
     // SAFETY: as `scatter_level`.
     unsafe {
@@ -188,6 +147,67 @@ pub fn jacobian_scatter_level(
     }
     #[cfg(not(target_arch = "x86_64"))]
     unreachable!()
+}
+
+/// Checks what every vector loop relies on and returns the number of points `m`: the CPU and
+/// the grid ([`usable`]), `per_point` values given for each point, rows that 32-bit gather
+/// indices reach.
+fn points(what: &str, layout: &Layout, columns: &[f32], per_point: usize, given: usize) -> usize {
+    assert!(
+        usable(layout.features),
+        "{what}: the vector hash-grid loops need AVX-512 F and 2 features"
+    );
+    let m = columns.len() / 3;
+    assert!(
+        given >= per_point * m,
+        "{what}: {given} values for {m} points of {per_point}"
+    );
+    assert!(
+        layout.total_rows() < i32::MAX as usize,
+        "{what}: table rows beyond i32"
+    );
+    m
+}
+
+/// Checks that `table` holds every row's two features.
+fn table_covers(what: &str, layout: &Layout, table: &[f32]) {
+    assert!(
+        table.len() >= 2 * layout.total_rows(),
+        "{what}: table of {} values",
+        table.len()
+    );
+}
+
+/// Checks that `grad` holds level `l`'s rows.
+fn level_covered(what: &str, layout: &Layout, l: usize, grad: &[f32]) {
+    assert!(
+        grad.len() >= 2 * layout.rows[l],
+        "{what}: level gradient of {} values",
+        grad.len()
+    );
+}
+
+/// The feature pairs at `rows` (absolute): points 0–7's and points 8–15's, each `a, b` in turn.
+///
+/// # Safety
+/// AVX-512 F, and every row below the table's rows.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+#[target_feature(enable = "avx512f")]
+unsafe fn gather_pairs(rows: __m512i, pairs: *const f64) -> (__m512, __m512) {
+    // SAFETY: the caller's promise.
+    unsafe {
+        (
+            _mm512_castpd_ps(_mm512_i32gather_pd::<8>(
+                _mm512_castsi512_si256(rows),
+                pairs,
+            )),
+            _mm512_castpd_ps(_mm512_i32gather_pd::<8>(
+                _mm512_extracti64x4_epi64::<1>(rows),
+                pairs,
+            )),
+        )
+    }
 }
 
 /// Level constants, broadcast.
@@ -349,15 +369,7 @@ unsafe fn encode(
         for c in 0..8 {
             let r = _mm512_add_epi32(rows[c], offset);
             // SAFETY: every row is below total_rows, the table holds 2 floats a row.
-            let (tlo, thi) = unsafe {
-                (
-                    _mm512_castpd_ps(_mm512_i32gather_pd::<8>(_mm512_castsi512_si256(r), pairs)),
-                    _mm512_castpd_ps(_mm512_i32gather_pd::<8>(
-                        _mm512_extracti64x4_epi64::<1>(r),
-                        pairs,
-                    )),
-                )
-            };
+            let (tlo, thi) = unsafe { gather_pairs(r, pairs) };
             lo = _mm512_add_ps(
                 lo,
                 _mm512_mul_ps(_mm512_permutexvar_ps(first8, weights[c]), tlo),
@@ -446,18 +458,7 @@ unsafe fn jacobian(
             for c in 0..8 {
                 let r = _mm512_add_epi32(rows[c], offset);
                 // SAFETY: every row is below total_rows.
-                let (lo, hi) = unsafe {
-                    (
-                        _mm512_castpd_ps(_mm512_i32gather_pd::<8>(
-                            _mm512_castsi512_si256(r),
-                            pairs,
-                        )),
-                        _mm512_castpd_ps(_mm512_i32gather_pd::<8>(
-                            _mm512_extracti64x4_epi64::<1>(r),
-                            pairs,
-                        )),
-                    )
-                };
+                let (lo, hi) = unsafe { gather_pairs(r, pairs) };
                 let feature = [
                     _mm512_permutex2var_ps(lo, even, hi),
                     _mm512_permutex2var_ps(lo, odd, hi),
