@@ -21,6 +21,7 @@ use burn::backend::{
 use burn::nn::Linear;
 use burn::prelude::*;
 
+use crate::kernels::dense_bf16;
 use crate::kernels::flex::{product, values as slice, written};
 
 /// The dense layer and its gradients as backend operations (`W` in Burn's `[in, out]` layout).
@@ -46,6 +47,9 @@ impl DenseOps for Flex {
         let ([n, i], [wi, o]) = (dims(&x), dims(&w));
         assert_eq!(i, wi, "dense: input width {i}, weight rows {wi}");
         let (x, w, b) = (slice(&x), slice(&w), slice(&b));
+        if dense_bf16::active() && dense_bf16::worth_it(o) && n > 0 {
+            return tensor(dense_bf16::forward(x, w, b, [n, i, o]), [n, o]);
+        }
         // SAFETY: the bias fills every row, then the product accumulates onto it; x is
         // [n, i], w is [i, o], dst is [n, o], all row-major.
         unsafe {
@@ -69,6 +73,9 @@ impl DenseOps for Flex {
         let (g, w) = (contiguous(&g), contiguous(&w));
         let ([n, o], [i, _]) = (dims(&g), dims(&w));
         let (g, w) = (slice(&g), slice(&w));
+        if dense_bf16::active() && dense_bf16::worth_it(i) && n > 0 {
+            return tensor(dense_bf16::grad_input(g, w, [n, o, i]), [n, i]);
+        }
         // g [n, o] · wᵀ: w is [i, o] row-major, so wᵀ [o, i] has strides (1, o).
         // SAFETY: a GEMM writes all of dst [n, i].
         unsafe {
@@ -89,6 +96,10 @@ impl DenseOps for Flex {
         let (x, g) = (contiguous(&x), contiguous(&g));
         let ([n, i], [_, o]) = (dims(&x), dims(&g));
         let (x, g) = (slice(&x), slice(&g));
+        // The sum over rows gains at every width (6.9 against 14.4 ms for 16 columns).
+        if dense_bf16::active() && o <= dense_bf16::MAX_COLUMNS && n > 0 && o > 0 {
+            return tensor(dense_bf16::grad_weight(x, g, [n, i, o]), [i, o]);
+        }
         // xᵀ [i, n] has strides (1, i); g is [n, o].
         // SAFETY: a GEMM writes all of dst [i, o].
         unsafe {
@@ -106,6 +117,10 @@ impl DenseOps for Flex {
     }
 }
 
+fn tensor(values: Vec<f32>, shape: [usize; 2]) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, shape))
+}
+
 fn dims(t: &FlexTensor) -> [usize; 2] {
     let s = t.shape();
     [s[0], s[1]]
@@ -115,13 +130,15 @@ fn dims(t: &FlexTensor) -> [usize; 2] {
 struct DenseBackward;
 
 impl<B: Backend + DenseOps> Backward<B, 3> for DenseBackward {
-    /// The input (for the weight gradient) and the weight (for the input gradient).
-    type State = (FloatTensor<B>, FloatTensor<B>);
+    /// The input (for the weight gradient), the weight (for the input gradient) and whether
+    /// the forward's product ran in bf16 (the gradients' do too).
+    type State = (FloatTensor<B>, FloatTensor<B>, bool);
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [x_node, w_node, b_node] = ops.parents;
         let g = grads.consume::<B>(&ops.node);
-        let (x, w) = ops.state;
+        let (x, w, bf16) = ops.state;
+        let _precision = dense_bf16::scope(bf16);
         if let Some(node) = b_node {
             let out = w.shape()[1];
             let db = B::float_reshape(B::float_sum_dim(g.clone(), 0), [out].into());
@@ -150,7 +167,7 @@ impl<B: Backend + DenseOps, C: CheckpointStrategy> DenseOps for Autodiff<B, C> {
             OpsKind::Tracked(prep) => {
                 let (x, w) = (x.into_primitive(), w.into_primitive());
                 let y = B::dense(x.clone(), w.clone(), b.into_primitive());
-                prep.finish((x, w), y)
+                prep.finish((x, w, dense_bf16::active()), y)
             }
             OpsKind::UnTracked(prep) => prep.finish(B::dense(
                 x.into_primitive(),

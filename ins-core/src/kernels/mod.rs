@@ -15,6 +15,7 @@
 
 pub mod adam;
 pub mod dense;
+pub mod dense_bf16;
 pub mod flex;
 pub mod gram;
 pub mod hash_grid;
