@@ -44,7 +44,8 @@ pub struct VggArgs {
     /// Arithmetic of the VGG convolutions: f32; bf16 (BF16 products with f32 sums on Intel AMX
     /// or by AVX-512 BF16, on flex; f32 on CPUs with neither); or f16 (Burn's convolution in
     /// half precision on a wgpu adapter with f16 shaders; f32 elsewhere). Default: bf16 where
-    /// the CPU has either, else f32.
+    /// the CPU has either, else f32. f32 also keeps a NeRF field's products in f32 (bf16 by
+    /// default where the CPU has AVX-512 BF16).
     #[arg(long, value_name = "P")]
     pub precision: Option<Precision>,
 }
@@ -55,9 +56,18 @@ impl VggArgs {
         self.precision.unwrap_or(Precision::Bf16.effective())
     }
 
+    /// `--precision f32` keeps a NeRF field's dense products in f32 too (else bf16 where the
+    /// CPU has AVX-512 BF16), on this thread for the rest of the command.
+    pub fn apply_to_products(&self) {
+        if self.precision == Some(Precision::F32) {
+            std::mem::forget(ins_core::kernels::dense_bf16::forbid());
+        }
+    }
+
     /// Loads the VGG these arguments describe, at the asked precision (saying so when BF16 was
     /// asked for and this CPU cannot run it).
     pub fn load(&self, device: &Device) -> anyhow::Result<Vgg> {
+        self.apply_to_products();
         let vgg = load_vgg(&self.source(), device)?;
         let precision = self.precision();
         let runs = precision.effective_on(device);
@@ -152,6 +162,7 @@ impl TrainCommand<'_> {
         next: &str,
     ) -> Result<TrainOutcome<V::Model>> {
         V::kind(cfg)?;
+        self.vgg.apply_to_products();
         let backend = self.device.backend.resolve();
         let device = backend.try_device()?;
         // A first wgpu run compiles and tunes kernels for minutes: say so until the first step.

@@ -91,6 +91,8 @@ fn flex_and_wgpu_agree<V: Variant>(cfg: V::Config, step: usize, dir: PathBuf, wh
 where
     V::Config: Send,
 {
+    // wgpu's products are f32: so are flex's here (a NeRF's run in bf16 where the CPU can).
+    let _f32 = ins_core::kernels::dense_bf16::forbid();
     let (l_flex, g_flex) = loss_and_gradients_at::<V>(&cfg, step, BackendChoice::Flex, &dir);
     assert!(
         l_flex.is_finite() && l_flex > 0.0,

@@ -109,7 +109,7 @@ pub fn render_looks(
         let (sigma, colours, shaded) = if density_first {
             // The density first; the stylizer and the colour only in front of where each
             // ray turns opaque (a stylized field's colour is most of a sample's cost).
-            let (raw, features) = model.field.geometry.forward(points.clone());
+            let (raw, features) = model.geometry(points.clone());
             let sigma = host(model.field.geometry.activate(raw.clone()))?;
             let mut open = transmittance.clone();
             let mut shaded = Vec::with_capacity(n);
@@ -227,7 +227,7 @@ pub(crate) fn geometry_until_opaque(
         }
         pad_rows(&mut x, 3, n_eval);
         let points = Tensor::<1>::from_floats(x.as_slice(), device).reshape([n_eval, 3]);
-        let (raw, feature) = model.field.geometry.forward(points);
+        let (raw, feature) = model.geometry(points);
         // Unreadable densities keep every sample: slower, never wrong.
         let sigma =
             host(model.field.geometry.activate(raw.clone())).unwrap_or_else(|_| vec![0.0; n_eval]);
