@@ -5,6 +5,7 @@
 //! Adam), on small synthetic inputs written for the occasion; `hash-grid` and `vgg-layers` time
 //! single operations.
 
+mod dense;
 mod hash_grid;
 mod idr_pretrain;
 mod nerf_grid;
@@ -30,7 +31,7 @@ pub struct BenchArgs {
     /// Workloads: vgg, vgg-layers (per-convolution profile), siren, nerf-pretrain, nerf-stylize,
     /// nerf-grid, nerf-grid-stylize (the default stylization step: grid NeRF, guided NNFM),
     /// hash-grid, hash-grid-object (its points inside a small object), hash-grid-reference,
-    /// idr-pretrain (default: vgg, siren, nerf-pretrain,
+    /// idr-pretrain, dense (one 64-wide layer; default: vgg, siren, nerf-pretrain,
     /// nerf-stylize, nerf-grid).
     workloads: Vec<String>,
     #[command(flatten)]
@@ -40,7 +41,7 @@ pub struct BenchArgs {
     steps: usize,
     /// Arithmetic of the VGG convolutions: f32, bf16 (flex, with AMX or AVX-512 BF16; f32 where
     /// the CPU has neither) or f16 (wgpu, where the adapter has f16 shaders). Default: bf16
-    /// where the CPU can, as in training.
+    /// where the CPU can, as in training. f32 also keeps a NeRF's dense products in f32.
     #[arg(long)]
     precision: Option<Precision>,
 }
@@ -54,7 +55,7 @@ pub struct Timing {
     pub rays: Option<f64>,
 }
 
-const KNOWN: &str = "vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, nerf-grid-stylize, hash-grid, hash-grid-object, hash-grid-reference, idr-pretrain";
+const KNOWN: &str = "vgg, vgg-layers, siren, nerf-pretrain, nerf-stylize, nerf-grid, nerf-grid-stylize, hash-grid, hash-grid-object, hash-grid-reference, idr-pretrain, dense";
 
 pub fn run(args: BenchArgs) -> Result<()> {
     let workloads = if args.workloads.is_empty() {
@@ -66,6 +67,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     };
     let backend = args.device.backend.resolve();
     let precision = args.precision.unwrap_or(Precision::Bf16.effective());
+    let _products = (precision == Precision::F32).then(ins_core::kernels::dense_bf16::forbid);
     for w in &workloads {
         let device = backend.try_device()?.autodiff();
         device.seed(42);
@@ -88,6 +90,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 hash_grid::run(&device, args.steps, false, hash_grid::Points::Spread)?
             }
             "idr-pretrain" => idr_pretrain::run(&device, args.steps)?,
+            "dense" => dense::run(&device, args.steps, precision != Precision::F32)?,
             other => bail!("unknown workload {other:?} (known: {KNOWN})"),
         };
         let mut sorted = timing.times.clone();
@@ -107,6 +110,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "vgg" | "siren" | "nerf-stylize" | "nerf-grid-stylize"
         ) {
             line["precision"] = precision.effective_on(&device).to_string().into();
+        }
+        if matches!(w.as_str(), "nerf-grid-stylize" | "dense") {
+            let bf16 = precision != Precision::F32 && ins_core::kernels::dense_bf16::available();
+            line["products"] = if bf16 { "bf16" } else { "f32" }.into();
         }
         if let Some(rays) = timing.rays {
             line["rays_per_s"] = ((rays / median * 1e3).round()).into();
