@@ -12,16 +12,11 @@
 //! (consecutive `k`), the right operand packed as VDPBF16PS reads it (for each pair of `k`,
 //! 16 columns × 2), f32 sums starting from the bias (or zero) and written once.
 
-use std::sync::OnceLock;
-
 use rayon::prelude::*;
 
 /// Whether the CPU can run these kernels (AVX-512 F, BW and BF16) and `INS_DISABLE_BF16` is
-/// not set (the switch that also keeps VGG's convolutions in f32). Checked once.
-pub fn available() -> bool {
-    static AVAILABLE: OnceLock<bool> = OnceLock::new();
-    *AVAILABLE.get_or_init(ins_conv::dpbf16::available)
-}
+/// not set: the convolutions' own check (made once there), the same switch for both.
+pub use ins_conv::dpbf16::available;
 
 /// Rows `0..k` of a row-major f32 matrix (`stride` floats apart, `n` columns) as bf16 pairs of
 /// consecutive rows: `out[p·width + c]` holds rows `2p` and `2p + 1` of column `c` (low, high
