@@ -22,7 +22,7 @@ pub use ins_conv::dpbf16::available;
 /// consecutive rows: `out[p·width + c]` holds rows `2p` and `2p + 1` of column `c` (low, high
 /// half), as VDPBF16PS pairs them; missing rows and columns `n..width` are 0. This is the right
 /// operand's layout (16 columns a vector) and, read along `p`, a transposed left operand's.
-fn pack_pairs(src: &[f32], [k, n]: [usize; 2], stride: usize, width: usize) -> Vec<u32> {
+pub(super) fn pack_pairs(src: &[f32], [k, n]: [usize; 2], stride: usize, width: usize) -> Vec<u32> {
     let pairs = k.div_ceil(2);
     let mut out = vec![0u32; pairs * width];
     for p in 0..pairs {
@@ -187,7 +187,7 @@ mod x86 {
 ///
 /// # Safety
 /// `c` valid for `m·n` writes.
-unsafe fn product_packed(
+pub(super) unsafe fn product_packed(
     a: &[u32],
     a_strides: [usize; 2],
     [m, pairs, n]: [usize; 3],
@@ -237,7 +237,7 @@ unsafe fn product_packed(
 pub const MAX_COLUMNS: usize = 64;
 
 /// Rows of one parallel job of the row-wise products.
-const ROW_CHUNK: usize = 256;
+pub(super) const ROW_CHUNK: usize = 256;
 
 /// `start + a [m, k] · b` → `[m, n]` (row-major `a`, `b` packed for `[k, n]`), rows in
 /// parallel, the result written once (never zeroed first).
@@ -272,7 +272,7 @@ fn rows_times(a: &[f32], [m, k, n]: [usize; 3], b: &[u32], start: &[f32]) -> Vec
 }
 
 /// A row of f32 values as bf16 pairs of consecutive values (an odd tail paired with 0).
-fn row_as_pairs(src: &[f32], dst: &mut [u32]) {
+pub(super) fn row_as_pairs(src: &[f32], dst: &mut [u32]) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: AVX-512 BF16 (the callers checked `available`).
     unsafe {

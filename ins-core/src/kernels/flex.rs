@@ -25,6 +25,45 @@ pub(crate) type Strided = (*const f32, [isize; 2]);
 /// Every stride-addressed element must lie inside its buffer, and `dst` must be writable for
 /// `m·n` values (and initialised when `accumulate`).
 pub(crate) unsafe fn product(
+    dims: [usize; 3],
+    dst: *mut f32,
+    accumulate: bool,
+    scale: f32,
+    a: Strided,
+    b: Strided,
+) {
+    // SAFETY: the caller's promise.
+    unsafe {
+        product_on(
+            gemm::Parallelism::Rayon(0),
+            dims,
+            dst,
+            accumulate,
+            scale,
+            a,
+            b,
+        )
+    }
+}
+
+/// [`product`] on this thread alone (inside a parallel job).
+///
+/// # Safety
+/// As [`product`].
+pub(crate) unsafe fn product_serial(
+    dims: [usize; 3],
+    dst: *mut f32,
+    accumulate: bool,
+    scale: f32,
+    a: Strided,
+    b: Strided,
+) {
+    // SAFETY: the caller's promise.
+    unsafe { product_on(gemm::Parallelism::None, dims, dst, accumulate, scale, a, b) }
+}
+
+unsafe fn product_on(
+    parallelism: gemm::Parallelism,
     [m, k, n]: [usize; 3],
     dst: *mut f32,
     accumulate: bool,
@@ -53,7 +92,7 @@ pub(crate) unsafe fn product(
             false,
             false,
             false,
-            gemm::Parallelism::Rayon(0),
+            parallelism,
         )
     }
 }

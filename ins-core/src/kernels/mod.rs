@@ -7,7 +7,8 @@
 //! result once (measured in docs/measurements.md).
 //!
 //! - [`flex`]: what the Flex kernels share (a strided GEMM, unzeroed outputs, lanes).
-//! - [`dense`]: the linear layer; [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
+//! - [`dense`]: the linear layer ([`dense_bf16`]: its products in bf16; [`dense_chain`]: an
+//!   MLP's layers fused for renders); [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
 //!   activation and its slope; [`gram`]: Gram matrices.
 //! - [`adam`]: Adam's step fused into one pass over each parameter.
 //! - [`hash_grid`]: the multiresolution hash encoding on slices, as CubeCL kernels, and as a
@@ -16,6 +17,7 @@
 pub mod adam;
 pub mod dense;
 pub mod dense_bf16;
+pub mod dense_chain;
 pub mod flex;
 pub mod gram;
 pub mod hash_grid;

@@ -3,10 +3,9 @@
 
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::activation::relu;
 
 use super::hash_grid::{HashGrid, HashGridConfig};
-use crate::kernels::dense::dense;
+use crate::kernels::dense_chain::dense_chain;
 
 /// Configuration of a [`GridGeometry`].
 #[derive(Config, Debug)]
@@ -69,7 +68,7 @@ impl GridGeometry {
     /// `x [N, 3]` → raw density `[N]` and features `[N, d_features]`.
     pub fn forward(&self, x: Tensor<2>) -> (Tensor<1>, Tensor<2>) {
         let h = self.grid.forward(self.normalize(x));
-        let out = dense(&self.out, relu(dense(&self.hidden, h)));
+        let out = dense_chain(h, &[(&self.hidden, true), (&self.out, false)]);
         let [n, w] = out.dims();
         let sigma = out.clone().slice([0..n, 0..1]).reshape([n]);
         (sigma, out.slice([0..n, 1..w]))

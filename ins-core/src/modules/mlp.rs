@@ -5,6 +5,7 @@ use burn::prelude::*;
 use burn::tensor::activation::relu;
 
 use crate::kernels::dense::dense;
+use crate::kernels::dense_chain::dense_chain;
 
 /// Configuration of a [`ReluMlp`].
 #[derive(Config, Debug)]
@@ -53,6 +54,9 @@ impl ReluMlpConfig {
 impl ReluMlp {
     /// `[N, d_input] → [N, d_hidden]`.
     pub fn forward(&self, input: Tensor<2>) -> Tensor<2> {
+        if self.skip_at.is_none() {
+            return dense_chain(input, &self.chain());
+        }
         let mut h = input.clone();
         for (i, layer) in self.layers.iter().enumerate() {
             if i > 0 && Some(i) == self.skip_at {
@@ -61,6 +65,11 @@ impl ReluMlp {
             h = relu(dense(layer, h));
         }
         h
+    }
+
+    /// The layers with their ReLUs, for [`dense_chain`] (no skip).
+    fn chain(&self) -> Vec<(&Linear, bool)> {
+        self.layers.iter().map(|l| (l, true)).collect()
     }
 }
 
@@ -87,7 +96,14 @@ impl RgbMlp {
 
     /// `[N, d_input] → [N, 3]` in (0, 1).
     pub fn forward(&self, input: Tensor<2>) -> Tensor<2> {
-        burn::tensor::activation::sigmoid(dense(&self.rgb, self.hidden.forward(input)))
+        let logits = if self.hidden.skip_at.is_none() {
+            let mut layers = self.hidden.chain();
+            layers.push((&self.rgb, false));
+            dense_chain(input, &layers)
+        } else {
+            dense(&self.rgb, self.hidden.forward(input))
+        };
+        burn::tensor::activation::sigmoid(logits)
     }
 }
 

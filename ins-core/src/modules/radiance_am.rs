@@ -5,11 +5,10 @@
 //!
 //! with λ and γ learnable and starting at 1, so the stylized field starts as the pretrained one.
 
-use crate::kernels::dense::dense;
+use crate::kernels::dense_chain::dense_chain;
 use burn::module::Param;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::activation::relu;
 
 /// Configuration of a [`RadianceAm`].
 #[derive(Config, Debug)]
@@ -101,10 +100,13 @@ impl FeatureBlend {
     pub fn forward(&self, features: Tensor<2>, style: Tensor<2>) -> Tensor<2> {
         let fs = Tensor::cat(vec![features.clone(), style], 1);
         let last = self.layers.len() - 1;
-        let f_s = self.layers.iter().enumerate().fold(fs, |h, (i, l)| {
-            let h = dense(l, h);
-            if i < last { relu(h) } else { h }
-        });
+        let layers: Vec<(&Linear, bool)> = self
+            .layers
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (l, i < last))
+            .collect();
+        let f_s = dense_chain(fs, &layers);
         blend(self.gamma.val(), features, f_s)
     }
 }
@@ -126,7 +128,7 @@ impl RadianceAm {
         let [n, _] = features.dims();
         let fs = Tensor::cat(vec![features.clone(), style.clone()], 1);
         let d = &self.density;
-        let sigma_s = dense(&d.out, relu(dense(&d.hidden, fs))).reshape([n]);
+        let sigma_s = dense_chain(fs, &[(&d.hidden, true), (&d.out, false)]).reshape([n]);
         (
             blend(d.lambda.val(), sigma, sigma_s),
             self.feature.forward(features, style),

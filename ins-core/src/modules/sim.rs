@@ -4,6 +4,7 @@
 //! position can enter at layer 2, so that style features may vary over space.
 
 use crate::kernels::dense::{dense, dense_with};
+use crate::kernels::dense_chain::dense_chain_with;
 use burn::nn::{Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::activation::relu;
@@ -152,6 +153,20 @@ impl Sim {
         let from_position = wd + if self.code_every_layer { k } else { 0 };
         let constant = h0.matmul(w1.clone().slice([0..wd, 0..o])) + code_bias(l1, wd);
         let w_position = w1.slice([from_position..from_position + self.d_position, 0..o]);
+        if s == 1 {
+            // One style: every layer from the second is the position's product plus a bias,
+            // a chain (fused where no gradient is asked for).
+            let mut chain = vec![(w_position, constant.reshape([o]), last > 1)];
+            let mut d_in = o;
+            for (i, layer) in self.layers.iter().enumerate().skip(2) {
+                let w = layer.weight.val();
+                let o = w.dims()[1];
+                let bias = code_bias(layer, d_in).reshape([o]);
+                chain.push((w.slice([0..d_in, 0..o]), bias, i < last));
+                d_in = o;
+            }
+            return dense_chain_with(position, chain);
+        }
         let mut h = per_style(position, w_position, constant, s, true);
         for (i, layer) in self.layers.iter().enumerate().skip(1) {
             if i > 1 {
