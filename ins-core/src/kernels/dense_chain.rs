@@ -23,7 +23,7 @@ use crate::kernels::dense::dense_with;
 use crate::kernels::dense_bf16::{
     self, MAX_COLUMNS, ROW_CHUNK, available, pack_pairs, product_packed, row_as_pairs,
 };
-use crate::kernels::flex::product_serial;
+use crate::kernels::flex::product_on;
 
 /// One layer of a chain on the host: `w [i, o]` (row-major, Burn's layout), `bias [o]`, and
 /// whether a ReLU follows.
@@ -118,7 +118,8 @@ pub fn forward(x: &[f32], n: usize, layers: &[HostLayer]) -> Vec<f32> {
                         for r in 0..rows {
                             std::ptr::copy_nonoverlapping(l.bias.as_ptr(), dst.add(r * l.o), l.o);
                         }
-                        product_serial(
+                        product_on(
+                            gemm::Parallelism::None,
                             [rows, l.i, l.o],
                             dst,
                             true,

@@ -46,23 +46,11 @@ pub(crate) unsafe fn product(
     }
 }
 
-/// [`product`] on this thread alone (inside a parallel job).
+/// [`product`] with `parallelism` chosen (`gemm::Parallelism::None` inside a parallel job).
 ///
 /// # Safety
 /// As [`product`].
-pub(crate) unsafe fn product_serial(
-    dims: [usize; 3],
-    dst: *mut f32,
-    accumulate: bool,
-    scale: f32,
-    a: Strided,
-    b: Strided,
-) {
-    // SAFETY: the caller's promise.
-    unsafe { product_on(gemm::Parallelism::None, dims, dst, accumulate, scale, a, b) }
-}
-
-unsafe fn product_on(
+pub(crate) unsafe fn product_on(
     parallelism: gemm::Parallelism,
     [m, k, n]: [usize; 3],
     dst: *mut f32,
