@@ -236,7 +236,7 @@ fn host_tensor<const D: usize>(t: Tensor<D>) -> Option<FlexTensor> {
     }
     match t.into_dispatch().kind {
         DispatchTensorKind::Flex(BackendTensor::Float(f)) if f.dtype() == DType::F32 => {
-            Some(f.to_contiguous())
+            Some(crate::kernels::flex::contiguous(&f))
         }
         _ => None,
     }
