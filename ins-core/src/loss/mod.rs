@@ -6,6 +6,7 @@
 
 pub mod color_transfer;
 pub mod gram;
+pub mod guided_match;
 pub mod perceptual;
 pub mod pixel;
 pub mod saturation;
@@ -21,5 +22,5 @@ pub use perceptual::{
 };
 pub use pixel::{mse, psnr};
 pub use ssim::ssim;
-pub use style::{MatchGuide, StyleLoss, StyleTargets};
+pub use style::{MatchGuide, PhotoGuide, StyleLoss, StyleTargets};
 pub use weights::LossWeights;

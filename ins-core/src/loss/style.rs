@@ -23,7 +23,9 @@ use serde::{Deserialize, Serialize};
 use vgg_import::{Vgg, VggFeatures};
 
 use super::gram::gram;
+use super::guided_match::{Columns, guided_nearest};
 use crate::eval::feature_match::{painting_positions, unit_columns};
+use crate::kernels::flex::on_flex;
 
 /// Which statistic of the painting a stylization matches.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -74,10 +76,18 @@ pub enum StyleTargets {
     MeanStd([(Tensor<2>, Tensor<2>); 4]),
 }
 
-/// Per style, per layer, `[N, M]`: which painting features (of `M`) each of a photo's `N`
-/// positions may match under a guided NNFM: 0 for those allowed, −4 for the others (added to
-/// cosines, it rules them out). `None` at a layer left unguided (plain NNFM there).
-pub type MatchGuide = Vec<[Option<Tensor<2>>; 4]>;
+/// Per style, per layer: what a guided NNFM's matches are held to, the photo's features there.
+/// `None` at a layer left unguided (plain NNFM there).
+pub type MatchGuide = Vec<[Option<PhotoGuide>; 4]>;
+
+/// A photo's features at one layer and the radius of the guide (see [`candidates`]).
+#[derive(Clone, Debug)]
+pub struct PhotoGuide {
+    /// The photo's features as unit columns `[C, N]`, detached.
+    pub unit: Tensor<2>,
+    /// How far (in cosine) below the photo's best match a render's match may lie.
+    pub radius: f32,
+}
 
 /// From this radius on every feature is allowed (cosines lie in [−1, 1]): plain NNFM, without
 /// the guide's cost.
@@ -159,17 +169,18 @@ impl StyleTargets {
         }
         let layers = photo.style_layers();
         Some(
-            paintings
-                .iter()
-                .enumerate()
-                .map(|(i, painting)| {
+            (0..paintings.len())
+                .map(|i| {
                     std::array::from_fn(|l| {
                         (radii[l] < UNGUIDED_RADIUS).then(|| {
                             let f = layers[l];
                             let [b, c, h, w] = f.dims();
                             let row = i.min(b - 1);
                             let fi = f.clone().detach().slice([row..row + 1]).reshape([c, h * w]);
-                            candidates(fi, painting[l].clone(), radii[l])
+                            PhotoGuide {
+                                unit: unit_columns(fi),
+                                radius: radii[l],
+                            }
                         })
                     })
                 })
@@ -190,8 +201,8 @@ impl StyleTargets {
                     for (i, painting) in paintings.iter().enumerate() {
                         let [_, c, h, w] = f.dims();
                         let fi = (*f).clone().slice([i..i + 1]).reshape([c, h * w]);
-                        let bias = guide.and_then(|g| g[i][l].clone());
-                        let term = nnfm_among(fi, painting[l].clone(), bias)
+                        let photo = guide.and_then(|g| g[i][l].as_ref());
+                        let term = nnfm_among(fi, painting[l].clone(), photo)
                             .div_scalar(paintings.len() as f32);
                         total = Some(match total {
                             Some(t) => t + term,
@@ -242,7 +253,12 @@ fn nearest_unit(unit: Tensor<2>, painting: Tensor<2>, bias: Option<Tensor<2>>) -
 /// `[N, M]`: 0 where painting column `j` is within `radius` (in cosine) of the best match of
 /// photo column `i`, −4 elsewhere (so that adding it to cosines excludes those).
 pub fn candidates(photo: Tensor<2>, painting: Tensor<2>, radius: f32) -> Tensor<2> {
-    let sim = unit_columns(photo.detach()).transpose().matmul(painting);
+    candidates_of_unit(unit_columns(photo.detach()), painting, radius)
+}
+
+/// [`candidates`] of a photo's unit columns.
+fn candidates_of_unit(unit: Tensor<2>, painting: Tensor<2>, radius: f32) -> Tensor<2> {
+    let sim = unit.transpose().matmul(painting);
     let best = sim.clone().max_dim(1);
     let [n, m] = sim.dims();
     (sim - best.expand([n, m]))
@@ -271,14 +287,44 @@ pub fn nnfm(features: Tensor<2>, painting: Tensor<2>) -> Tensor<1> {
     nnfm_among(features, painting, None)
 }
 
-/// [`nnfm`] with the matches among the candidates `bias` leaves (see [`candidates`]); the
-/// features are scaled to unit columns once, for the match and the distance both.
-fn nnfm_among(features: Tensor<2>, painting: Tensor<2>, bias: Option<Tensor<2>>) -> Tensor<1> {
+/// [`nnfm`] with the matches held to the `photo`'s guide where given (see [`candidates`]); the
+/// features are scaled to unit columns once, for the match and the distance both. On the CPU
+/// the match runs block by block ([`guided_nearest`]); elsewhere as tensor ops.
+fn nnfm_among(features: Tensor<2>, painting: Tensor<2>, photo: Option<&PhotoGuide>) -> Tensor<1> {
     let [_, n] = features.dims();
     let unit = unit_columns(features);
-    let matched = nearest_unit(unit.clone(), painting, bias);
+    let matched = if on_flex(&unit) {
+        nearest_on_host(unit.clone(), painting, photo)
+    } else {
+        let bias = photo.map(|g| candidates_of_unit(g.unit.clone(), painting.clone(), g.radius));
+        nearest_unit(unit.clone(), painting, bias)
+    };
     let cos = (unit * matched).sum_dim(0).reshape([n]);
     cos.neg().add_scalar(1.0).mean()
+}
+
+/// [`nearest_unit`] under the `photo`'s guide, by [`guided_nearest`].
+fn nearest_on_host(unit: Tensor<2>, painting: Tensor<2>, photo: Option<&PhotoGuide>) -> Tensor<2> {
+    let host = |t: &Tensor<2>| {
+        t.clone()
+            .detach()
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .expect("f32 values")
+    };
+    let ([c, n], [_, m]) = (unit.dims(), painting.dims());
+    let (r, s) = (host(&unit), host(&painting));
+    let p = photo.map(|g| (host(&g.unit), g.radius));
+    let index = guided_nearest(
+        Columns::new(&r, c, n),
+        p.as_ref()
+            .map(|(p, radius)| (Columns::new(p, c, n), *radius)),
+        Columns::new(&s, c, m),
+    );
+    let index: Vec<i64> = index.into_iter().map(i64::from).collect();
+    let index = Tensor::<1, Int>::from_data(TensorData::new(index, [n]), &unit.device());
+    painting.select(1, index).detach()
 }
 
 #[cfg(test)]
@@ -412,8 +458,11 @@ mod tests {
                 .unwrap()
         };
         let f = t2(&[&[1.0], &[0.5]], &d).require_grad();
-        let guide = candidates(photo, s.clone(), 0.1);
-        let g_guided = grad(nnfm_among(f.clone(), s.clone(), Some(guide)), &f);
+        let guide = PhotoGuide {
+            unit: unit_columns(photo),
+            radius: 0.1,
+        };
+        let g_guided = grad(nnfm_among(f.clone(), s.clone(), Some(&guide)), &f);
         let f = t2(&[&[1.0], &[0.5]], &d).require_grad();
         let g_nnfm = grad(nnfm(f.clone(), s), &f);
         // Descending: guided, the feature turns towards (0, 1); unguided, towards (1, 0).
