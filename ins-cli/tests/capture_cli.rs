@@ -382,6 +382,8 @@ fn a_masked_capture_trains_a_surface() {
     ok(cli(&[
         "train",
         "idr",
+        "--renderer",
+        "surface",
         "--scene",
         s(&scene),
         "--out",

@@ -268,6 +268,8 @@ fn a_stylized_surface_is_evaluated_along_its_capture_arc_with_its_texture_on_the
     ok(cli(&[
         "train",
         "idr",
+        "--renderer",
+        "surface",
         "--scene",
         s(&scene),
         "--steps",

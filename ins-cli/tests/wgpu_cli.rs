@@ -126,6 +126,8 @@ fn idr_trains_on_wgpu_as_on_flex() {
         &[
             "train",
             "idr",
+            "--renderer",
+            "surface",
             "--scene",
             s(&scene),
             "--holdout",

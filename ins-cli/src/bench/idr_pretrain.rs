@@ -1,6 +1,8 @@
 //! `ins-cli bench idr-pretrain`: one IDR pretraining step with `train idr`'s defaults, on a
-//! synthetic DTU scene at 400×300 (the size of scan37 in the README): sphere tracing of the
-//! rays, the differentiable surface point, colour, mask and eikonal losses, backward, Adam.
+//! synthetic DTU scene at 400×300 (the size of scan37 in the README): the SDF rendered as a
+//! volume (the coarse pass, the samples near the surface with their gradients and colours),
+//! colour, mask, eikonal and smoothness terms, backward, Adam. (Before the thirtieth session
+//! the default, and so this bench, was the sphere-traced surface.)
 
 use anyhow::{Context, Result};
 use burn::prelude::*;

@@ -148,6 +148,7 @@ impl Variant for Idr {
         cfg.stylizer.sim_width = cfg.sim_width_for();
         cfg.rays = cfg.rays_for();
         cfg.mask_weight = cfg.mask_weight_for();
+        cfg.mask_rays = Some(cfg.mask_rays_for());
         cfg.eikonal_points = Some(cfg.eikonal_points_for());
         cfg.eval_every = Some(cfg.eval_every_for());
         cfg.curvature_weight = Some(cfg.curvature_weight_for());
@@ -297,11 +298,9 @@ impl Variant for Idr {
 /// Pretraining options out of range, refused before anything is loaded or written.
 fn validate_pretraining(cfg: &IdrRunConfig) -> Result<()> {
     cfg.arch().validate().map_err(anyhow::Error::msg)?;
-    if !(0.0..=1.0).contains(&cfg.mask_rays) {
-        bail!(
-            "--mask-rays {}: the share of rays inside the masks is from 0 to 1",
-            cfg.mask_rays
-        );
+    let mask_rays = cfg.mask_rays_for();
+    if !(0.0..=1.0).contains(&mask_rays) {
+        bail!("--mask-rays {mask_rays}: the share of rays inside the masks is from 0 to 1");
     }
     let curvature = cfg.curvature_weight_for();
     if !(curvature >= 0.0 && curvature.is_finite()) {
@@ -341,7 +340,7 @@ pub fn pretrain_task(
         val_dir,
         device,
     )
-    .with_mask_rays(cfg.mask_rays)?;
+    .with_mask_rays(cfg.mask_rays_for())?;
     task.eikonal_points = cfg.eikonal_points_for();
     task.renderer = cfg.renderer;
     task.sampling = cfg.volume_sampling();
