@@ -176,23 +176,19 @@ fn train_render_eval_export_and_refuse_bad_input() {
     assert!(!too_fine.join("config.json").exists());
     // So are a colour grid out of range, a share of rays that is not one, a learning-rate
     // decay that is not a fraction and a smoothness weight without the volume renderer.
-    for (flag, value) in [
-        ("--color-grid", "4096"),
-        ("--mask-rays", "1.5"),
-        ("--lr-decay", "0"),
-        ("--curvature-weight", "0.5"),
+    for (args, refused) in [
+        (&["--color-grid", "4096"][..], "--color-grid 4096"),
+        (&["--mask-rays", "1.5"][..], "--mask-rays 1.5"),
+        (&["--lr-decay", "0"][..], "--lr-decay 0"),
+        (
+            &["--curvature-weight", "0.5", "--renderer", "surface"][..],
+            "--curvature-weight 0.5",
+        ),
     ] {
-        let o = cli(&[
-            "train",
-            "idr",
-            "--scene",
-            s(&scene),
-            flag,
-            value,
-            "--out",
-            s(&too_fine),
-        ]);
-        assert_clean_failure(&o, &format!("{flag} {value}"));
+        let mut line = vec!["train", "idr", "--scene", s(&scene), "--out", s(&too_fine)];
+        line.extend_from_slice(args);
+        let o = cli(&line);
+        assert_clean_failure(&o, refused);
         assert!(!too_fine.join("config.json").exists());
     }
     let nerf_like = dir.path().join("nerf_like");
@@ -240,10 +236,10 @@ fn bench_idr_pretrain_reports_a_step_time_and_its_rays() {
     assert_eq!(line["workload"], "idr-pretrain");
     let ms = line["ms_per_step"].as_f64().unwrap();
     assert!(ms > 0.0, "{line}");
-    // 2048 rays (the pretraining default) in that time.
+    // 512 rays (the volume renderer's pretraining default) in that time.
     let rays_per_s = line["rays_per_s"].as_f64().unwrap();
     assert!(
-        (rays_per_s - 2048.0 / ms * 1e3).abs() <= 0.01 * rays_per_s + 1.0,
+        (rays_per_s - 512.0 / ms * 1e3).abs() <= 0.01 * rays_per_s + 1.0,
         "{line}"
     );
 }
