@@ -197,28 +197,20 @@ impl Lanes {
 /// compiled for the widest vector instructions of [`Lanes::detect`]. A build for the baseline
 /// x86-64 CPU runs every loop 4 lanes wide; each copy here is vectorized 16 or 8 wide. The
 /// arithmetic is the same in each (Rust never fuses a multiply and an add on its own), so the
-/// results are too. `= fused, plain;` runs `fused` where the CPU has FMA (both wide builds) and
-/// `plain` on the baseline: a loop that fuses its multiply-adds (`f32::mul_add`) can then
-/// differ from the baseline's in the last bit.
+/// results are too.
 macro_rules! vectorized {
     ($(#[$m:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) = $body:path;) => {
-        $crate::kernels::flex::vectorized! {
-            $(#[$m])* $vis fn $name($($arg: $ty),*) = $body, $body;
-        }
-    };
-    // `$fused` for the AVX2 and AVX-512 builds (both have FMA), `$plain` for the baseline.
-    ($(#[$m:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) = $fused:expr, $plain:expr;) => {
         $(#[$m])*
         $vis fn $name($($arg: $ty),*) {
             #[cfg(target_arch = "x86_64")]
             {
                 #[target_feature(enable = "avx512f")]
                 fn avx512($($arg: $ty),*) {
-                    $fused($($arg),*)
+                    $body($($arg),*)
                 }
                 #[target_feature(enable = "avx2,fma")]
                 fn avx2($($arg: $ty),*) {
-                    $fused($($arg),*)
+                    $body($($arg),*)
                 }
                 match $crate::kernels::flex::Lanes::detect() {
                     // SAFETY: the CPU has AVX-512F (checked at run time).
@@ -228,7 +220,7 @@ macro_rules! vectorized {
                     $crate::kernels::flex::Lanes::Baseline => {}
                 }
             }
-            $plain($($arg),*)
+            $body($($arg),*)
         }
     };
 }

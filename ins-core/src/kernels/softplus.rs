@@ -35,33 +35,21 @@ pub mod kernel {
     /// Adding and subtracting 1.5·2²³ rounds to the nearest integer, in any SIMD width.
     const ROUND: f32 = 12_582_912.0;
 
-    /// `a·b + c`: one fused instruction where the CPU has FMA (`FMA` true: only inside the
-    /// AVX2/AVX-512 builds, where it halves the polynomials' instructions), a multiply and an
-    /// add otherwise (without the instruction `mul_add` would be a libm call per element).
-    #[inline(always)]
-    fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
-        if FMA { a.mul_add(b, c) } else { a * b + c }
-    }
-
     /// `e^{−|a|}`: `2^k · e^r` with `|r| ≤ ln2/2` and a degree-7 Taylor polynomial (relative
     /// error below 2·10⁻⁷). `|a|` is capped at 87, where the result (1.6·10⁻³⁸) is still normal.
     #[inline(always)]
-    fn exp_neg_abs_with<const FMA: bool>(a: f32) -> f32 {
+    pub fn exp_neg_abs(a: f32) -> f32 {
         let t = -a.abs().min(87.0);
         let k = (t * LOG2E + ROUND) - ROUND;
         let r = (t - k * LN2_HI) - k * LN2_LO;
-        let mut p = 1.0 / 5040.0;
-        for c in [
-            1.0 / 720.0,
-            1.0 / 120.0,
-            1.0 / 24.0,
-            1.0 / 6.0,
-            0.5,
-            1.0,
-            1.0,
-        ] {
-            p = madd::<FMA>(p, r, c);
-        }
+        let p = 1.0 / 5040.0;
+        let p = p * r + 1.0 / 720.0;
+        let p = p * r + 1.0 / 120.0;
+        let p = p * r + 1.0 / 24.0;
+        let p = p * r + 1.0 / 6.0;
+        let p = p * r + 0.5;
+        let p = p * r + 1.0;
+        let p = p * r + 1.0;
         // 2^k through the exponent bits (k ∈ [−126, 0]).
         p * f32::from_bits(((k as i32 + 127) as u32) << 23)
     }
@@ -69,52 +57,36 @@ pub mod kernel {
     /// `ln(1 + e)` for `e ∈ [0, 1]`: `2·atanh(s)` with `s = e/(2+e) ≤ 1/3`, its series to
     /// `s¹³` (relative error below 10⁻⁸ before rounding).
     #[inline(always)]
-    fn log1p_unit_with<const FMA: bool>(e: f32) -> f32 {
+    pub fn log1p_unit(e: f32) -> f32 {
         let s = e / (2.0 + e);
         let s2 = s * s;
-        let mut p = 1.0 / 13.0;
-        for c in [1.0 / 11.0, 1.0 / 9.0, 1.0 / 7.0, 1.0 / 5.0, 1.0 / 3.0, 1.0] {
-            p = madd::<FMA>(p, s2, c);
-        }
+        let p = 1.0 / 13.0;
+        let p = p * s2 + 1.0 / 11.0;
+        let p = p * s2 + 1.0 / 9.0;
+        let p = p * s2 + 1.0 / 7.0;
+        let p = p * s2 + 1.0 / 5.0;
+        let p = p * s2 + 1.0 / 3.0;
+        let p = p * s2 + 1.0;
         2.0 * s * p
     }
 
-    /// `log(1 + e^{βx})/β`, given `1/β` (a multiply where a divide would cost several).
+    /// `log(1 + e^{βx})/β`.
     #[inline(always)]
-    fn softplus_with<const FMA: bool>(x: f32, beta: f32, inv_beta: f32) -> f32 {
+    pub fn softplus(x: f32, beta: f32) -> f32 {
         let a = beta * x;
-        let y = (a.max(0.0) + log1p_unit_with::<FMA>(exp_neg_abs_with::<FMA>(a))) * inv_beta;
+        let y = (a.max(0.0) + log1p_unit(exp_neg_abs(a))) / beta;
         // NaN stays NaN (`max` and `min` would drop it): a diverging run must be seen.
         if x.is_nan() { x } else { y }
     }
 
     /// `σ(βx)`.
     #[inline(always)]
-    fn slope_with<const FMA: bool>(x: f32, beta: f32) -> f32 {
+    pub fn slope(x: f32, beta: f32) -> f32 {
         let a = beta * x;
-        let e = exp_neg_abs_with::<FMA>(a);
+        let e = exp_neg_abs(a);
         let inv = 1.0 / (1.0 + e);
         let y = if a >= 0.0 { inv } else { e * inv };
         if x.is_nan() { x } else { y }
-    }
-
-    /// `log(1 + e^{βx})/β`, as the kernels compute it (the plain build).
-    pub fn softplus(x: f32, beta: f32) -> f32 {
-        softplus_with::<false>(x, beta, 1.0 / beta)
-    }
-
-    /// `σ(βx)`, as the kernels compute it (the plain build).
-    pub fn slope(x: f32, beta: f32) -> f32 {
-        slope_with::<false>(x, beta)
-    }
-
-    /// [`softplus`] and [`slope`] with fused multiply-adds, as the AVX2 and AVX-512 builds
-    /// compute them.
-    pub fn fused(x: f32, beta: f32) -> (f32, f32) {
-        (
-            softplus_with::<true>(x, beta, 1.0 / beta),
-            slope_with::<true>(x, beta),
-        )
     }
 
     /// What each op computes, on an input and, for the backwards, an incoming gradient.
@@ -129,12 +101,12 @@ pub mod kernel {
     }
 
     #[inline(always)]
-    fn apply<const FMA: bool>(map: Map, x: f32, beta: f32, inv_beta: f32) -> f32 {
+    fn apply(map: Map, x: f32, beta: f32) -> f32 {
         match map {
-            Map::Softplus => softplus_with::<FMA>(x, beta, inv_beta),
-            Map::Slope => slope_with::<FMA>(x, beta),
+            Map::Softplus => softplus(x, beta),
+            Map::Slope => slope(x, beta),
             Map::SlopeGradient => {
-                let s = slope_with::<FMA>(x, beta);
+                let s = slope(x, beta);
                 beta * s * (1.0 - s)
             }
         }
@@ -144,7 +116,7 @@ pub mod kernel {
     /// `for_each` was compiled as a function of its own, outside the vectorized caller, and ran
     /// one lane at a time (a fifth of an IDR step).
     #[inline(always)]
-    fn map_loop<const MAP: u8, const FMA: bool>(
+    fn map_loop<const MAP: u8>(
         x: &[f32],
         g: Option<&[f32]>,
         beta: f32,
@@ -155,36 +127,29 @@ pub mod kernel {
             1 => Map::Slope,
             _ => Map::SlopeGradient,
         };
-        let inv_beta = 1.0 / beta;
         let n = out.len();
         let x = &x[..n];
         match g {
             None => {
                 for i in 0..n {
-                    out[i].write(apply::<FMA>(map, x[i], beta, inv_beta));
+                    out[i].write(apply(map, x[i], beta));
                 }
             }
             Some(g) => {
                 let g = &g[..n];
                 for i in 0..n {
-                    out[i].write(apply::<FMA>(map, x[i], beta, inv_beta) * g[i]);
+                    out[i].write(apply(map, x[i], beta) * g[i]);
                 }
             }
         }
     }
 
     #[inline(always)]
-    fn run_loop<const FMA: bool>(
-        map: Map,
-        x: &[f32],
-        g: Option<&[f32]>,
-        beta: f32,
-        out: &mut [MaybeUninit<f32>],
-    ) {
+    fn run_loop(map: Map, x: &[f32], g: Option<&[f32]>, beta: f32, out: &mut [MaybeUninit<f32>]) {
         match map {
-            Map::Softplus => map_loop::<0, FMA>(x, g, beta, out),
-            Map::Slope => map_loop::<1, FMA>(x, g, beta, out),
-            Map::SlopeGradient => map_loop::<2, FMA>(x, g, beta, out),
+            Map::Softplus => map_loop::<0>(x, g, beta, out),
+            Map::Slope => map_loop::<1>(x, g, beta, out),
+            Map::SlopeGradient => map_loop::<2>(x, g, beta, out),
         }
     }
 
@@ -196,7 +161,7 @@ pub mod kernel {
             g: Option<&[f32]>,
             beta: f32,
             out: &mut [MaybeUninit<f32>],
-        ) = run_loop::<true>, run_loop::<false>;
+        ) = run_loop;
     }
 }
 
@@ -334,8 +299,8 @@ mod tests {
     use super::*;
     use burn::tensor::Distribution;
 
-    /// The kernels, plain and with fused multiply-adds, against libm (in f64) on β = 100 and
-    /// x ∈ [−0.8, 3]: both tails, down to values of 10⁻³⁷ (f32's normal range ends just below).
+    /// The kernels against libm (in f64) on β = 100 and x ∈ [−0.8, 3]: both tails, down to
+    /// values of 10⁻³⁷ (f32's normal range ends just below).
     #[test]
     fn kernels_match_libm() {
         let beta = 100.0f32;
@@ -345,15 +310,9 @@ mod tests {
             let a = (beta * x) as f64;
             let sp = (a.max(0.0) + (-a.abs()).exp().ln_1p()) / beta as f64;
             let s = 1.0 / (1.0 + (-a).exp());
-            let (fused_sp, fused_s) = kernel::fused(x, beta);
-            for (y_sp, y_s) in [
-                (kernel::softplus(x, beta), kernel::slope(x, beta)),
-                (fused_sp, fused_s),
-            ] {
-                let e_sp = (y_sp as f64 - sp).abs() / sp.max(1e-30);
-                let e_s = (y_s as f64 - s).abs() / s.max(1e-30);
-                worst = [worst[0].max(e_sp), worst[1].max(e_s)];
-            }
+            let e_sp = (kernel::softplus(x, beta) as f64 - sp).abs() / sp.max(1e-30);
+            let e_s = (kernel::slope(x, beta) as f64 - s).abs() / s.max(1e-30);
+            worst = [worst[0].max(e_sp), worst[1].max(e_s)];
         }
         assert!(
             worst[0] < 1e-6,
