@@ -146,8 +146,8 @@ fn pretrain_and_score(
 /// pixels (checker squares of 3 pixels) the volume's did too. The smoothness term keeps the
 /// checkers out of the surface: the mesh's normals 22° from the truth on average at weight
 /// 0.5, 35° without it (docs/measurements.md). With half the rays inside the masks (the
-/// default since the thirtieth session): probes +0.085 to +0.13, normals 19.7°, the mesh
-/// 0.038 from the truth, held out IoU 0.984 and 17.55 dB.
+/// default since the thirtieth session): probes +0.03 to +0.13, normals 20.9°, the mesh
+/// 0.041 from the truth, held out IoU 0.976 and 17.31 dB (135 s alone).
 #[test]
 fn volume_rendered_sdf_carves_a_corner_masks_cannot() {
     use ins_scene::data::synthetic::AnalyticScene;
