@@ -60,7 +60,8 @@ pub struct IdrRunConfig {
     /// or surface (IDR: the sphere-traced first hit, faster a step but blind to hollows the
     /// masks do not show). Sphere tracing still draws the normals and depth, and meshes come
     /// from the SDF's zero level set either way. On scan37 in about 10 minutes on 2 cores the
-    /// volume reached 20.31 dB held out (IoU 0.988) where the surface reached 19.98 (0.990).
+    /// volume's defaults reached 20.94 dB held out (IoU 0.984) where the surface's reached
+    /// 19.98 (0.990).
     /// (A run folder written before the volume renderer existed is a surface run.)
     #[arg(long, default_value = "volume")]
     #[serde(default)]
