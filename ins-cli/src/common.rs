@@ -185,6 +185,9 @@ impl TrainCommand<'_> {
         opts.first_step = first_step;
         let outcome = ins_models::run::train::<V>(cfg, vgg, &device, opts)?;
         print_summary(self.out, &outcome);
+        if let Some(line) = final_scores_line(&outcome.final_scores) {
+            eprintln!("{line}");
+        }
         eprintln!("done in {:.1} s: {next}", outcome.seconds);
         Ok(outcome)
     }
@@ -205,16 +208,34 @@ pub fn merged_config<V: Variant>(
     ins_models::config::merge_with_file(cli, matches, file)
 }
 
-/// The one JSON line a finished `train` prints on stdout.
+/// The one JSON line a finished `train` prints on stdout: with `final`, the scores of the
+/// held-out views rendered at the end (also in the run's `val/final.json`).
 pub fn print_summary<M>(out: &Path, outcome: &TrainOutcome<M>) {
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "run": out,
         "steps": outcome.steps,
         "seconds": (outcome.seconds * 10.0).round() / 10.0,
         "last": outcome.last,
         "warnings": outcome.warnings,
     });
+    if !outcome.final_scores.is_empty() {
+        summary["final"] = serde_json::json!(outcome.final_scores);
+    }
     println!("{summary}");
+}
+
+/// The final scores for a reader: `held out (7 views): iou 0.9843, psnr_mask 20.94 dB, …`.
+fn final_scores_line(scores: &std::collections::BTreeMap<String, f64>) -> Option<String> {
+    let views = scores.get("views")?;
+    let terms: Vec<String> = scores
+        .iter()
+        .filter(|(k, _)| k.as_str() != "views")
+        .map(|(k, v)| match k.as_str() {
+            k if k.starts_with("psnr") => format!("{k} {v:.2} dB"),
+            k => format!("{k} {v:.4}"),
+        })
+        .collect();
+    Some(format!("held out ({views} views): {}", terms.join(", ")))
 }
 
 /// Parses `WxH`.

@@ -7,7 +7,7 @@ use burn::prelude::*;
 use clap::{ArgMatches, Args};
 use ins_core::imaging::RgbImage;
 use ins_core::render::sphere_tracing::TraceOptions;
-use ins_models::idr::eval::{evaluate_views, render_camera};
+use ins_models::idr::eval::{evaluate_views, mean_scores, render_camera};
 use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
 use ins_models::run::RunKind;
 use ins_scene::camera::Camera;
@@ -182,15 +182,15 @@ pub fn eval(a: EvalIdr) -> Result<()> {
             serde_json::json!({"view": e.view, "iou": (e.iou * 10000.0).round() / 10000.0, "psnr_mask": (e.psnr_mask * 1000.0).round() / 1000.0, "psnr": (e.psnr * 1000.0).round() / 1000.0})
         );
     }
-    let n = evals.len() as f64;
+    let mean = mean_scores(&evals);
     println!(
         "{}",
         serde_json::json!({
             "mean": true,
             "views": evals.len(),
-            "iou": (evals.iter().map(|e| e.iou).sum::<f64>() / n * 10000.0).round() / 10000.0,
-            "psnr_mask": (evals.iter().map(|e| e.psnr_mask).sum::<f64>() / n * 1000.0).round() / 1000.0,
-            "psnr": (evals.iter().map(|e| e.psnr).sum::<f64>() / n * 1000.0).round() / 1000.0,
+            "iou": (mean["iou"] * 10000.0).round() / 10000.0,
+            "psnr_mask": (mean["psnr_mask"] * 1000.0).round() / 1000.0,
+            "psnr": (mean["psnr"] * 1000.0).round() / 1000.0,
             // Whether training saw the masks (without them, the scores are against masks it
             // never used).
             "masks_used": run.masked(),

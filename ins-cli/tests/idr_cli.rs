@@ -22,7 +22,7 @@ fn train_render_eval_export_and_refuse_bad_input() {
         "8",
     ]));
     let run = dir.path().join("run");
-    ok(cli(&[
+    let trained = ok(cli(&[
         "train",
         "idr",
         "--scene",
@@ -48,9 +48,12 @@ fn train_render_eval_export_and_refuse_bad_input() {
         "metrics.jsonl",
         "loss_curve.png",
         "val/final.png",
+        "val/final.json",
     ] {
         assert!(run.join(f).exists(), "missing {f}");
     }
+    let summary: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&trained.stdout).trim()).unwrap();
 
     // Render a view (colour and normals) and evaluate the held-out views as JSON lines.
     let png = dir.path().join("v.png");
@@ -92,6 +95,19 @@ fn train_render_eval_export_and_refuse_bad_input() {
             .iter()
             .all(|l| l["iou"].as_f64().is_some_and(|v| (0.0..=1.0).contains(&v)))
     );
+    // The run's own final scores are those of the same held-out views.
+    let (last, scored) = (&lines[2], &summary["final"]);
+    assert_eq!(scored["views"].as_f64(), Some(2.0), "{summary}");
+    for key in ["iou", "psnr_mask"] {
+        let (a, b) = (last[key].as_f64().unwrap(), scored[key].as_f64().unwrap());
+        assert!(
+            (a - b).abs() < 1e-3,
+            "{key}: eval idr {a}, the run's final {b}"
+        );
+    }
+    let file: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("val/final.json")).unwrap()).unwrap();
+    assert_eq!(&file, scored);
 
     // A mesh any viewer opens: a PLY header with vertices, faces and colours.
     let ply = dir.path().join("m.ply");

@@ -120,6 +120,19 @@ fn pretrain_render_eval_stylize_and_refuse_bad_input() {
     assert!(lines.len() >= 2);
     assert!(lines.last().unwrap()["mean"].as_bool().unwrap());
     assert!(lines[0]["psnr"].as_f64().unwrap() > 5.0);
+    // The run's own final scores: the same views (all of them, up to eight), the same PSNR.
+    let held_out = lines.len() - 1;
+    assert!(held_out <= 8, "{held_out} held-out views");
+    let scored = &summary["final"];
+    assert_eq!(scored["views"].as_f64(), Some(held_out as f64), "{summary}");
+    let (a, b) = (
+        lines.last().unwrap()["psnr"].as_f64().unwrap(),
+        scored["psnr"].as_f64().unwrap(),
+    );
+    assert!(
+        (a - b).abs() < 1e-3,
+        "eval nerf {a} dB, the run's final {b}"
+    );
 
     // Stylize with the generated demo painting, then render a mix and evaluate depth.
     let style = gradient_painting(&dir.path().join("style.png"));

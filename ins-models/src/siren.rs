@@ -19,7 +19,7 @@ use ins_scene::patches::PatchSpec;
 use serde::{Deserialize, Serialize};
 
 use crate::image_task::{ImageObjective, ImageTask, render_image};
-use crate::run::{Run, RunConfig, RunKind, Start, StyleArgs, Variant};
+use crate::run::{FinalScores, Run, RunConfig, RunKind, Start, StyleArgs, Variant};
 
 /// Everything that defines a SIREN+INS run: the `ins-cli train siren` flags and the fields of
 /// the run's `config.json` are this one struct (unknown fields in a `--config` file are refused).
@@ -265,10 +265,10 @@ impl Variant for Siren {
         cfg: &SirenRunConfig,
         folder: &RunFolder,
         device: &Device,
-    ) -> Result<()> {
+    ) -> Result<FinalScores> {
         let images = load_images(cfg)?;
         write_results(&model.valid(), &images, folder.dir(), device)?;
-        Ok(())
+        Ok(FinalScores::new())
     }
 }
 

@@ -8,6 +8,7 @@
 //!   metrics.jsonl      one line per logged step
 //!   loss_curve.png     the loss terms over the run
 //!   val/               pictures of held-out views, per evaluation and at the end
+//!                      (`final.png`), and the final views' scores (`final.json`)
 //!   run.lock           held (flock) by the process training into the folder
 //! ```
 
@@ -80,6 +81,11 @@ impl RunFolder {
     /// `val/final.png`: the held-out views at the end of the run.
     pub fn final_picture(&self) -> PathBuf {
         self.val_dir().join("final.png")
+    }
+
+    /// `val/final.json`: the scores of those views.
+    pub fn final_scores(&self) -> PathBuf {
+        self.val_dir().join("final.json")
     }
 
     /// Takes the folder's lock (creating the folder), or refuses with the pid of the process

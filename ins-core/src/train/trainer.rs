@@ -80,6 +80,9 @@ pub struct TrainOutcome<M> {
     pub seconds: f64,
     /// The probes' warnings this process printed (a task's watched limits, e.g. saturation).
     pub warnings: Vec<String>,
+    /// The scores of the finished run's final renders (held-out means, with how many views),
+    /// empty until the run's variant fills them in.
+    pub final_scores: BTreeMap<String, f64>,
 }
 
 /// Runs phases of a [`Task`].
@@ -295,6 +298,7 @@ impl<O: Objective> Trainer<O> {
             last,
             seconds: t0.elapsed().as_secs_f64(),
             warnings,
+            final_scores: BTreeMap::new(),
         })
     }
 

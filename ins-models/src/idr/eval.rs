@@ -17,6 +17,7 @@ use super::model::IdrModel;
 use super::render::render_surface;
 use super::volume::VolumeSampling;
 use super::volume_view::render_volume_view;
+use crate::run::FinalScores;
 
 /// Rays per chunk when rendering whole images.
 pub const CHUNK: usize = 16384;
@@ -252,6 +253,19 @@ pub fn evaluate_views(
         });
     }
     Ok(out)
+}
+
+/// The means of `evals`' scores (`iou`, `psnr_mask`, `psnr`; PSNR averaged in dB, view by
+/// view, as `eval idr` does) and their count (`views`).
+pub fn mean_scores(evals: &[SurfaceEval]) -> FinalScores {
+    let n = evals.len().max(1) as f64;
+    let mean = |f: fn(&SurfaceEval) -> f64| evals.iter().map(f).sum::<f64>() / n;
+    FinalScores::from([
+        ("views".into(), evals.len() as f64),
+        ("iou".into(), mean(|e| e.iou)),
+        ("psnr_mask".into(), mean(|e| e.psnr_mask)),
+        ("psnr".into(), mean(|e| e.psnr)),
+    ])
 }
 
 /// Stacks evaluation pictures into one PNG.

@@ -13,11 +13,11 @@ use ins_scene::data::{Scene, SceneFormat, Split, detect_format};
 use ins_scene::patches::PatchSpec;
 
 use super::config::IdrRunConfig;
-use super::eval::{evaluate_views, save_pictures};
+use super::eval::{evaluate_views, mean_scores, save_pictures};
 use super::model::{IdrModel, SdfRenderer};
 use super::task::{IdrObjective, IdrTask, SurfaceStylization};
 use crate::run::scene_frame::{check_scene_frame, write_scene_frame};
-use crate::run::{Run, RunKind, Start, Variant};
+use crate::run::{FinalScores, Run, RunKind, Start, Variant};
 
 /// IDR + INS.
 pub struct Idr;
@@ -261,14 +261,15 @@ impl Variant for Idr {
         vec![phase]
     }
 
-    /// Renders up to six held-out views (two training views without any): `val/final.png`.
+    /// Renders the held-out views and (pretraining) scores them as `eval idr` does;
+    /// `val/final.png` shows up to six (two training views, unscored, for a run without any).
     fn final_report(
         model: &IdrModel,
         task: &IdrTask,
         _cfg: &IdrRunConfig,
         folder: &RunFolder,
         device: &Device,
-    ) -> Result<()> {
+    ) -> Result<FinalScores> {
         let views: Vec<usize> = if task.eval_views.is_empty() {
             task.scene
                 .split(Split::Train)
@@ -277,7 +278,7 @@ impl Variant for Idr {
                 .take(2)
                 .collect()
         } else {
-            task.eval_views.iter().copied().take(6).collect()
+            task.eval_views.clone()
         };
         let code = task
             .style
@@ -291,7 +292,13 @@ impl Variant for Idr {
             &task.trace,
             device,
         )?;
-        save_pictures(&evals, &folder.final_picture())
+        save_pictures(&evals[..evals.len().min(6)], &folder.final_picture())?;
+        // A stylized render is not meant to match the photos.
+        Ok(if task.eval_views.is_empty() || task.style.is_some() {
+            FinalScores::new()
+        } else {
+            mean_scores(&evals)
+        })
     }
 }
 

@@ -18,7 +18,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::eval::{evaluate_views, save_pictures};
+use super::eval::{evaluate_views, mean_scores, save_pictures};
 use super::model::{IdrModel, SdfRenderer};
 use super::render::render_surface;
 use super::volume::{VolumeSampling, background_colours, render_volume};
@@ -473,17 +473,11 @@ impl Task for IdrTask {
                 .eval_dir
                 .join(format!("step_{:06}.png", step.global_step + 1)),
         )?;
-        let n = evals.len().max(1) as f64;
-        Ok(vec![
-            (
-                "val_iou".into(),
-                evals.iter().map(|e| e.iou).sum::<f64>() / n,
-            ),
-            (
-                "val_psnr_mask".into(),
-                evals.iter().map(|e| e.psnr_mask).sum::<f64>() / n,
-            ),
-        ])
+        let means = mean_scores(&evals);
+        Ok(["iou", "psnr_mask"]
+            .into_iter()
+            .map(|k| (format!("val_{k}"), means[k]))
+            .collect())
     }
 }
 

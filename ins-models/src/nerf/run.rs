@@ -25,7 +25,7 @@ use super::state_io::NerfState;
 use super::task::{EvalSchedule, NerfObjective, NerfTask, Sampler, Stylization};
 use crate::run::scene::{heldout_views, load_scene, spread};
 use crate::run::scene_frame::{check_scene_frame, write_scene_frame};
-use crate::run::{Run, RunKind, Start, Variant};
+use crate::run::{FinalScores, Run, RunKind, Start, Variant};
 
 /// NeRF + INS.
 pub struct Nerf;
@@ -241,17 +241,18 @@ impl Variant for Nerf {
         vec![phase]
     }
 
-    /// Renders up to eight held-out views at the end of a run: `val/final.png`.
+    /// Renders up to eight held-out views at the end of a run, spread over them:
+    /// `val/final.png`, and (pretraining) their mean PSNR and SSIM.
     fn final_report(
         model: &NerfModel,
         task: &NerfTask,
         cfg: &NerfRunConfig,
         folder: &RunFolder,
         device: &Device,
-    ) -> Result<()> {
+    ) -> Result<FinalScores> {
         let views = heldout_views(&task.scene);
         if views.is_empty() {
-            return Ok(());
+            return Ok(FinalScores::new());
         }
         let shown = spread(&views, 8);
         let code = task
@@ -269,7 +270,16 @@ impl Variant for Nerf {
         )?;
         let pictures: Vec<RgbImage> = evals.iter().map(|e| e.picture(&task.scene)).collect();
         save_eval_picture(&pictures, &folder.final_picture())?;
-        Ok(())
+        if task.style.is_some() {
+            // A stylized render is not meant to match the photos.
+            return Ok(FinalScores::new());
+        }
+        let n = evals.len() as f64;
+        Ok(FinalScores::from([
+            ("views".into(), n),
+            ("psnr".into(), evals.iter().map(|e| e.psnr).sum::<f64>() / n),
+            ("ssim".into(), evals.iter().map(|e| e.ssim).sum::<f64>() / n),
+        ]))
     }
 }
 

@@ -38,9 +38,14 @@ pub fn train<V: Variant>(
         lock: _lock,
     } = prepare::<V>(cfg, vgg, device, &opts)?;
     let final_pictures = opts.final_pictures;
-    let outcome = Trainer::new(phases, opts).run(&mut task, model)?;
+    let mut outcome = Trainer::new(phases, opts).run(&mut task, model)?;
     if outcome.finished && final_pictures {
-        V::final_report(&outcome.model, &task, &cfg, &folder, device)?;
+        outcome.final_scores = V::final_report(&outcome.model, &task, &cfg, &folder, device)?;
+        if !outcome.final_scores.is_empty() {
+            let path = folder.final_scores();
+            let json = serde_json::to_string_pretty(&outcome.final_scores)?;
+            ins_io::write_atomic(&path, json.as_bytes())?;
+        }
     }
     Ok(outcome)
 }

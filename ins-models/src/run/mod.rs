@@ -23,4 +23,4 @@ pub use any::{AnyRun, RunVariant, load_scene_run};
 pub use args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};
 pub use lifecycle::{Prepared, Run, prepare, train};
 pub use scene_render::{MeshOptions, PathFrame, RunInfo, RunMesh, SceneRender};
-pub use variant::{RunConfig, RunState, Start, Variant};
+pub use variant::{FinalScores, RunConfig, RunState, Start, Variant};

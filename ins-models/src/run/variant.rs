@@ -13,6 +13,9 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use super::args::{RunKind, StyleArgs};
+
+/// Scores of a finished run's final renders by name (see [`Variant::final_report`]).
+pub type FinalScores = std::collections::BTreeMap<String, f64>;
 use super::lifecycle::Run;
 
 /// What the run lifecycle reads of any variant's configuration: its paintings, its seed and,
@@ -123,12 +126,13 @@ pub trait Variant: Sized + 'static {
         weights: LossWeights,
     ) -> Vec<Phase<Self::Objective>>;
     /// What a finished run writes besides its checkpoint (pictures of held-out views, the
-    /// stylized images), on the plain `device`.
+    /// stylized images), on the plain `device`, and the scores of those views (means over
+    /// them, with their count as `views`; empty where nothing is held out).
     fn final_report(
         model: &Self::Model,
         task: &Self::Task,
         cfg: &Self::Config,
         folder: &RunFolder,
         device: &Device,
-    ) -> Result<()>;
+    ) -> Result<FinalScores>;
 }
