@@ -216,11 +216,11 @@ pub fn forward(layout: &Layout, table: &[f32], positions: &[f32], out: &mut [f32
         .into_par_iter()
         .zip(positions.par_chunks(3 * share))
         .for_each(|(mut parts, pos)| {
-            let columns = vector::loops(nf).map(|v| (v, vector::columns(pos)));
+            let columns = vector::usable(nf).then(|| vector::columns(pos));
             for (l, dst) in parts.iter_mut().enumerate() {
                 let done = columns
                     .as_ref()
-                    .map_or(0, |(v, c)| (v.encode_level)(layout, l, table, c, dst));
+                    .map_or(0, |c| vector::encode_level(layout, l, table, c, dst));
                 let rest = dst.chunks_exact_mut(nf).zip(pos.chunks_exact(3)).skip(done);
                 for (d, p) in rest {
                     let (rows, w) = layout.corner_weights(l, p);
@@ -357,7 +357,7 @@ pub fn backward_table(
                 }
             }
         });
-    let columns = vector::loops(nf).map(|v| (v, vector::columns(positions)));
+    let columns = vector::usable(nf).then(|| vector::columns(positions));
     level_slices(layout, grad_table)
         .into_par_iter()
         .zip(by_level.par_chunks(n * nf))
@@ -366,7 +366,7 @@ pub fn backward_table(
             let off = layout.offset[l];
             let done = columns
                 .as_ref()
-                .map_or(0, |(v, c)| (v.scatter_level)(layout, l, c, go, g));
+                .map_or(0, |c| vector::scatter_level(layout, l, c, go, g));
             let rest = positions
                 .chunks_exact(3)
                 .zip(go.chunks_exact(nf))
@@ -439,9 +439,11 @@ pub fn jacobian(layout: &Layout, table: &[f32], positions: &[f32], jac: &mut [f3
     jac.par_chunks_mut(width * CHUNK)
         .zip(positions.par_chunks(3 * CHUNK))
         .for_each(|(jac, pos)| {
-            let done = vector::loops(nf).map_or(0, |v| {
-                (v.jacobian_points)(layout, table, &vector::columns(pos), jac)
-            });
+            let done = if vector::usable(nf) {
+                vector::jacobian_points(layout, table, &vector::columns(pos), jac)
+            } else {
+                0
+            };
             for (i, (j, p)) in jac
                 .chunks_exact_mut(width)
                 .zip(pos.chunks_exact(3))
@@ -482,14 +484,14 @@ pub fn jacobian_backward_table(
 ) {
     let (levels, nf) = (layout.levels(), layout.features);
     let width = levels * nf * 3;
-    let columns = vector::loops(nf).map(|v| (v, vector::columns(positions)));
+    let columns = vector::usable(nf).then(|| vector::columns(positions));
     level_slices(layout, grad_table)
         .into_par_iter()
         .enumerate()
         .for_each(|(l, g)| {
             let off = layout.offset[l];
-            let done = columns.as_ref().map_or(0, |(v, c)| {
-                (v.jacobian_scatter_level)(layout, l, c, grad_jac, g)
+            let done = columns.as_ref().map_or(0, |c| {
+                vector::jacobian_scatter_level(layout, l, c, grad_jac, g)
             });
             let rest = positions
                 .chunks_exact(3)

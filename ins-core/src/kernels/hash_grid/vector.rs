@@ -1,58 +1,81 @@
 //! Which vector loops the hash grid runs on this CPU: [`avx512`]'s 16 points at a time, else
-//! [`avx2`]'s 8, else none (`super::kernel`'s scalar loops take every point). Each loop returns
-//! how many points it took; all give the scalar loops' bits.
+//! [`avx2`]'s 8, else none (`super::kernel`'s scalar loops take every point). Each returns how
+//! many points it took; all give the scalar loops' bits.
 
 use super::kernel::Layout;
 use super::{avx2, avx512};
 
 pub use super::avx512::columns;
 
-/// A loop over one level's points: the layout, the level, two slices in, the slice it writes.
-pub type LevelLoop = fn(&Layout, usize, &[f32], &[f32], &mut [f32]) -> usize;
-
-/// One instruction set's loops (see [`avx512`] for what each does).
-pub struct Loops {
-    /// The instruction set.
-    pub name: &'static str,
-    /// Points a call handles together.
-    pub lanes: usize,
-    /// Whether the CPU runs them for a grid of this many features a level.
-    pub usable: fn(usize) -> bool,
-    /// A level's lookup.
-    pub encode_level: LevelLoop,
-    /// A level's table gradient.
-    pub scatter_level: LevelLoop,
-    /// The spatial Jacobian's rows.
-    pub jacobian_points: fn(&Layout, &[f32], &[f32], &mut [f32]) -> usize,
-    /// A level's table gradient of the Jacobian.
-    pub jacobian_scatter_level: LevelLoop,
+/// Whether a vector loop runs for a grid of `features` a level.
+pub fn usable(features: usize) -> bool {
+    avx512::usable(features) || avx2::usable(features)
 }
 
-/// Every vector path, widest first.
-pub static PATHS: [Loops; 2] = [
-    Loops {
-        name: "AVX-512",
-        lanes: avx512::LANES,
-        usable: avx512::usable,
-        encode_level: avx512::encode_level,
-        scatter_level: avx512::scatter_level,
-        jacobian_points: avx512::jacobian_points,
-        jacobian_scatter_level: avx512::jacobian_scatter_level,
-    },
-    Loops {
-        name: "AVX2",
-        lanes: avx2::LANES,
-        usable: avx2::usable,
-        encode_level: avx2::encode_level,
-        scatter_level: avx2::scatter_level,
-        jacobian_points: avx2::jacobian_points,
-        jacobian_scatter_level: avx2::jacobian_scatter_level,
-    },
-];
+/// See [`avx512::encode_level`].
+pub fn encode_level(
+    layout: &Layout,
+    l: usize,
+    table: &[f32],
+    columns: &[f32],
+    dst: &mut [f32],
+) -> usize {
+    let f = layout.features;
+    if avx512::usable(f) {
+        avx512::encode_level(layout, l, table, columns, dst)
+    } else if avx2::usable(f) {
+        avx2::encode_level(layout, l, table, columns, dst)
+    } else {
+        0
+    }
+}
 
-/// The widest loops this CPU runs for a grid of `features` a level, if any.
-pub fn loops(features: usize) -> Option<&'static Loops> {
-    PATHS.iter().find(|p| (p.usable)(features))
+/// See [`avx512::scatter_level`].
+pub fn scatter_level(
+    layout: &Layout,
+    l: usize,
+    columns: &[f32],
+    grad_level: &[f32],
+    grad: &mut [f32],
+) -> usize {
+    let f = layout.features;
+    if avx512::usable(f) {
+        avx512::scatter_level(layout, l, columns, grad_level, grad)
+    } else if avx2::usable(f) {
+        avx2::scatter_level(layout, l, columns, grad_level, grad)
+    } else {
+        0
+    }
+}
+
+/// See [`avx512::jacobian_points`].
+pub fn jacobian_points(layout: &Layout, table: &[f32], columns: &[f32], jac: &mut [f32]) -> usize {
+    let f = layout.features;
+    if avx512::usable(f) {
+        avx512::jacobian_points(layout, table, columns, jac)
+    } else if avx2::usable(f) {
+        avx2::jacobian_points(layout, table, columns, jac)
+    } else {
+        0
+    }
+}
+
+/// See [`avx512::jacobian_scatter_level`].
+pub fn jacobian_scatter_level(
+    layout: &Layout,
+    l: usize,
+    columns: &[f32],
+    grad_jac: &[f32],
+    grad: &mut [f32],
+) -> usize {
+    let f = layout.features;
+    if avx512::usable(f) {
+        avx512::jacobian_scatter_level(layout, l, columns, grad_jac, grad)
+    } else if avx2::usable(f) {
+        avx2::jacobian_scatter_level(layout, l, columns, grad_jac, grad)
+    } else {
+        0
+    }
 }
 
 #[cfg(test)]

@@ -5,7 +5,8 @@
 use super::super::kernel::{
     GridShape, Layout, backward_table, forward, jacobian, jacobian_backward_table,
 };
-use super::{PATHS, columns};
+use super::super::{avx2, avx512};
+use super::columns;
 
 /// Dense and hashed levels; 16·130 + 7 points (a ragged tail), some outside the unit cube
 /// and some on cell boundaries.
@@ -161,6 +162,41 @@ fn the_jacobian_and_its_table_gradient_give_the_scalar_loops_bits() {
     same_bits("table gradient", &grad, &want_grad);
 }
 
+/// A loop over one level's points: the layout, the level, two slices in, the slice it writes.
+type LevelLoop = fn(&Layout, usize, &[f32], &[f32], &mut [f32]) -> usize;
+
+/// One vector path's four loops, as `vector`'s entry points call them.
+struct Path {
+    name: &'static str,
+    lanes: usize,
+    usable: fn(usize) -> bool,
+    encode: LevelLoop,
+    scatter: LevelLoop,
+    jacobian: fn(&Layout, &[f32], &[f32], &mut [f32]) -> usize,
+    jacobian_scatter: LevelLoop,
+}
+
+const PATHS: [Path; 2] = [
+    Path {
+        name: "AVX-512",
+        lanes: avx512::LANES,
+        usable: avx512::usable,
+        encode: avx512::encode_level,
+        scatter: avx512::scatter_level,
+        jacobian: avx512::jacobian_points,
+        jacobian_scatter: avx512::jacobian_scatter_level,
+    },
+    Path {
+        name: "AVX2",
+        lanes: avx2::LANES,
+        usable: avx2::usable,
+        encode: avx2::encode_level,
+        scatter: avx2::scatter_level,
+        jacobian: avx2::jacobian_points,
+        jacobian_scatter: avx2::jacobian_scatter_level,
+    },
+];
+
 /// Each vector path this CPU has, called directly on every level: the points it takes (all
 /// but the ragged tail) get the scalar loops' bits.
 #[test]
@@ -182,7 +218,7 @@ fn every_vector_path_this_cpu_has_gives_the_scalar_loops_bits() {
         for l in 0..levels {
             let mut dst = vec![0f32; 2 * m];
             assert_eq!(
-                (path.encode_level)(&layout, l, &table, &cols, &mut dst),
+                (path.encode)(&layout, l, &table, &cols, &mut dst),
                 m,
                 "{name}"
             );
@@ -200,14 +236,10 @@ fn every_vector_path_this_cpu_has_gives_the_scalar_loops_bits() {
                 .collect();
             let rows = layout.offset[l]..layout.offset[l] + layout.rows[l];
             let g = &mut grad[2 * rows.start..2 * rows.end];
-            assert_eq!(
-                (path.scatter_level)(&layout, l, &cols, &level_go, g),
-                m,
-                "{name}"
-            );
+            assert_eq!((path.scatter)(&layout, l, &cols, &level_go, g), m, "{name}");
             let g = &mut jgrad[2 * rows.start..2 * rows.end];
             assert_eq!(
-                (path.jacobian_scatter_level)(&layout, l, &cols, &gj, g),
+                (path.jacobian_scatter)(&layout, l, &cols, &gj, g),
                 m,
                 "{name}"
             );
@@ -220,7 +252,7 @@ fn every_vector_path_this_cpu_has_gives_the_scalar_loops_bits() {
         );
         let mut jac = vec![0f32; m * levels * 6];
         assert_eq!(
-            (path.jacobian_points)(&layout, &table, &cols, &mut jac),
+            (path.jacobian)(&layout, &table, &cols, &mut jac),
             m,
             "{name}"
         );
