@@ -162,18 +162,15 @@ fn the_jacobian_and_its_table_gradient_give_the_scalar_loops_bits() {
     same_bits("table gradient", &grad, &want_grad);
 }
 
-/// A loop over one level's points: the layout, the level, two slices in, the slice it writes.
-type LevelLoop = fn(&Layout, usize, &[f32], &[f32], &mut [f32]) -> usize;
-
 /// One vector path's four loops, as `vector`'s entry points call them.
 struct Path {
     name: &'static str,
     lanes: usize,
     usable: fn(usize) -> bool,
-    encode: LevelLoop,
-    scatter: LevelLoop,
+    encode: fn(&Layout, usize, &[f32], &[f32], &mut [f32]) -> usize,
+    scatter: fn(&Layout, usize, &[f32], &[f32], &mut [f32]) -> usize,
     jacobian: fn(&Layout, &[f32], &[f32], &mut [f32]) -> usize,
-    jacobian_scatter: LevelLoop,
+    jacobian_scatter: fn(&Layout, usize, &[f32], &[f32], &mut [f32]) -> usize,
 }
 
 const PATHS: [Path; 2] = [
