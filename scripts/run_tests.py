@@ -3,7 +3,9 @@
 
 `cargo test` runs its test programs one after another. Ours are uneven: the wgpu ones spend
 minutes on one core while Mesa's lavapipe compiles GPU kernels on the CPU. Here every test
-program cargo builds is a job, in one of two lanes:
+program cargo builds is a job, or one job per module for the two programs made of modules
+(`tests/tests/library`, `ins-cli/tests/commands`: a module is what a program used to be), in
+one of two lanes:
 
 - the lavapipe lane runs the programs that compile GPU kernels, one after another: Mesa keeps
   each kernel's LLVM code on disk, so a program finds those the one before it compiled (with
@@ -32,11 +34,15 @@ import sys
 import threading
 import time
 
-# The programs that run wgpu on Mesa's lavapipe, in the order their lane runs them: the one
-# that compiles the kernels most others share (NeRF's and IDR's steps) first. Measured alone or
-# after the ones before them, empty caches, Intel Xeon: wgpu_steps 605 s, wgpu_cli 118 s,
-# backends 252 s, vgg_import 107 s, hash_grid 10 s.
-LAVAPIPE = ["wgpu_steps", "wgpu_cli", "backends", "vgg_import", "hash_grid"]
+# The test modules (or programs) that run wgpu on Mesa's lavapipe, in the order their lane runs
+# them. Most of their time is lavapipe compiling kernels, on one thread per process (CubeCL's
+# device thread), and CubeCL tuning each matmul size once per machine (its cache on disk), which
+# compiles five candidates for each. The step comparisons first: they tune the NeRF and IDR
+# sizes the CLI's runs then find decided (with Mesa's disk cache warm, one IDR step on wgpu
+# took 164 s against 514 s cold, AMD EPYC Zen 3). Each module keeps a process of its own, so
+# that the CPU lane, once its own jobs are done, compiles the next one on the other core (the
+# four library modules in one process took 2401 s there, on one core).
+LAVAPIPE = ["wgpu_steps", "backends", "vgg_import", "hash_grid", "wgpu_cli"]
 
 # The slowest CPU programs, slowest first (same machine, beside the lavapipe lane): starting
 # them first keeps the last minutes from being one long program alone.
@@ -75,6 +81,7 @@ class Jobs:
         self.built = False
         self.failed_build = False
         self.all = []
+        self.started = set()  # the LAVAPIPE modules whose job has started
 
     def add(self, job):
         with self.cond:
@@ -94,7 +101,9 @@ class Jobs:
     def take(self, lane):
         """The next job for `lane`: its own, best ranked among those built; once the build is
         over, the other lane's when its own are done. None when nothing is left (or the build
-        failed)."""
+        failed). While cargo builds, the lavapipe lane keeps LAVAPIPE's order: it waits for
+        the next module in it rather than start a later one that would compile the same
+        kernels cold."""
         other = "cpu" if lane == "lavapipe" else "lavapipe"
         with self.cond:
             while True:
@@ -102,9 +111,17 @@ class Jobs:
                     return None
                 for source in (lane, other) if self.built else (lane,):
                     jobs = self.pending[source]
-                    if jobs:
-                        jobs.sort(key=lambda j: rank(j[0], j[1]))
-                        return jobs.pop(0)
+                    if not jobs:
+                        continue
+                    jobs.sort(key=lambda j: rank(j[0], j[1]))
+                    if source == "lavapipe" and not self.built:
+                        due = next((m for m in LAVAPIPE if m not in self.started), None)
+                        if due is not None and jobs[0][0] != due:
+                            continue
+                    job = jobs.pop(0)
+                    if lane_of(job[0], job[1]) == "lavapipe":
+                        self.started.add(job[0])
+                    return job
                 if self.built:
                     return None
                 self.cond.wait()
@@ -143,12 +160,11 @@ def build(root, args, jobs):
                     held.remove(job)
                     jobs.add(job)
             continue
-        label = f"{os.path.basename(package)} {kind} {target['name']}"
-        job = (target["name"], label, [msg["executable"], *args], package)
-        if kind in ("test", "bench") and bins_missing.get(package):
-            held.append(job)
-        else:
-            jobs.add(job)
+        for job in program_jobs(msg["executable"], kind, target, package, args):
+            if kind in ("test", "bench") and bins_missing.get(package):
+                held.append(job)
+            else:
+                jobs.add(job)
     ok = proc.wait() == 0
     for job in held:  # the build is over: cargo built every binary it was going to
         jobs.add(job)
@@ -162,6 +178,30 @@ def build(root, args, jobs):
                       ["cargo", "test", "--release", *packages, "--doc", "--", *args], root))
     jobs.finish_build(ok, extra)
     return ok
+
+
+def program_jobs(executable, kind, target, package, args):
+    """The jobs of one test program: the program itself, or, for an integration test made of
+    modules (a folder with a `main.rs`: `tests/tests/library`, `ins-cli/tests/commands`), one
+    job per module, each in a process of its own, so that a module runs in the lane its
+    backend needs and shares the CPU and the wgpu device only with its own tests, as when
+    every file was a program. A name filter given to the script keeps programs whole."""
+    name = target["name"]
+    label = f"{os.path.basename(package)} {kind} {name}"
+    whole = [(name, label, [executable, *args], package)]
+    if args or kind != "test" or os.path.basename(target["src_path"]) != "main.rs":
+        return whole
+    listing = subprocess.run([executable, "--list", "--format", "terse"], cwd=package,
+                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    if listing.returncode != 0:
+        return whole  # it then fails where it runs, with its own message
+    modules = {}
+    for line in listing.stdout.splitlines():
+        if line.endswith(": test"):
+            test = line[: -len(": test")]
+            modules.setdefault(test.split("::")[0] if "::" in test else name, []).append(test)
+    return [(module, f"{label}::{module}", [executable, "--exact", *tests], package)
+            for module, tests in sorted(modules.items())] or whole
 
 
 def workspace_packages(root):

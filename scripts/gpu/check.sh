@@ -35,13 +35,13 @@ metrics $R/lego2 3
 stage lego_stylize_warm 90 $BIN train nerf --from $R/lego --style .dev/starry_night.jpg --out $R/lego_st2 --quiet --backend wgpu
 metrics $R/lego_st2 3
 stage siren 60 $BIN train siren --quiet --out $R/siren
-# 6. The real VGG-16 in f16 against f32 (tests/tests/vgg_import.rs; ignored in CI, where
-# lavapipe took ten minutes for it). The test binary finds its fixtures where it was built.
-if [ -f .dev/vgg_import.xz ]; then
-  unpack vgg_import
+# 6. The real VGG-16 in f16 against f32 (tests/tests/library/vgg_import.rs; ignored in CI,
+# where lavapipe took ten minutes for it). The test binary finds its fixtures where it was built.
+if [ -f .dev/library.xz ]; then
+  unpack library
   src=$(cat .dev/source_root)
   [ -e "$src" ] || { mkdir -p "$(dirname "$src")"; ln -s "$PWD" "$src"; }
-  (cd "$src/tests" && stage vgg_f16_real 120 /tmp/vgg_import --ignored --exact --nocapture \
-    f16_features_on_the_real_network_stay_close_to_f32)
+  (cd "$src/tests" && stage vgg_f16_real 120 /tmp/library --ignored --exact --nocapture \
+    vgg_import::f16_features_on_the_real_network_stay_close_to_f32)
 fi
 stamp "all done"

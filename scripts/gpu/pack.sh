@@ -23,15 +23,16 @@ if [ -n "${SPIRV_BIN:-}" ]; then
 else
   rm -f .dev/ins-cli-spirv.xz
 fi
-# The real VGG-16's f16 check, a test binary (ignored in CI: see tests/tests/vgg_import.rs),
-# with the folder it was built in (it reads its fixtures from there).
-vgg_test=$(cargo test --release -p ins-tests --test vgg_import --no-run --message-format=json \
+# The real VGG-16's f16 check, in the library's test program (ignored in CI: see
+# tests/tests/library/vgg_import.rs), with the folder it was built in (it reads its fixtures
+# from there).
+vgg_test=$(cargo test --release -p ins-tests --test library --no-run --message-format=json \
   | "$PYTHON" -c 'import json,sys
 for l in sys.stdin:
     m = json.loads(l)
-    if m.get("executable") and m.get("target", {}).get("name") == "vgg_import": print(m["executable"])')
-strip -o /tmp/vgg_import.stripped "$vgg_test"
-xz -9 -T2 -c /tmp/vgg_import.stripped > .dev/vgg_import.xz
+    if m.get("executable") and m.get("target", {}).get("name") == "library": print(m["executable"])')
+strip -o /tmp/library.stripped "$vgg_test"
+xz -9 -T2 -c /tmp/library.stripped > .dev/library.xz
 pwd > .dev/source_root
 if [ "${VGG:-1}" != 0 ]; then
 # The converted weights are found by a key of the ONNX file's path, size and modification time:
@@ -64,6 +65,6 @@ apt-get $o update >/dev/null
 (cd .gl && apt-get $o download libvulkan1 libglvnd0 libegl1 libgl1 libglx0 >/dev/null)
 if (( $(du -sb .dev .gl | awk '{s+=$1} END {print s}') > 63 * 1024 * 1024 )); then
   echo "warning: .dev and .gl pass 63 MiB: leaving the real-VGG f16 test out" >&2
-  rm -f .dev/vgg_import.xz
+  rm -f .dev/library.xz
 fi
 du -sh .dev .gl

@@ -1,7 +1,7 @@
 //! The hand-written kernels: every op of INS-rs that has its own backward, and the fused Adam
 //! step. Each runs plain Rust (rayon, `gemm`, AVX-512 / AVX2 through [`flex::vectorized`]) on
 //! Flex and, where the GPU needs one, a CubeCL kernel on wgpu; each is proven against the same
-//! function built from ordinary Burn ops (its tests, `tests/tests/hash_grid.rs`,
+//! function built from ordinary Burn ops (its tests, `tests/tests/library/hash_grid.rs`,
 //! `tests/tests/cpu_fallback.rs`). Why hand-written: Flex's generic ops copy, zero-fill and
 //! read transposes through copies, and autodiff keeps every intermediate; these write each
 //! result once (measured in docs/measurements.md).

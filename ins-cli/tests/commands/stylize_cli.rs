@@ -8,12 +8,10 @@
 //! workspace `data synth --format colmap` wrote for the same photos and prints the summary the
 //! real script prints. What is tested is the stage logic around it.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use common::*;
+use crate::common::*;
 
 /// Runs `ins-cli args…` with `INS_CACHE_DIR=cache` (the stand-in SfM's environment) and the
 /// workspace it copies.

@@ -4,8 +4,7 @@
 use ins_core::imaging::RgbImage;
 use ins_models::demo::{demo_content, demo_style};
 
-mod common;
-use common::*;
+use crate::common::*;
 
 #[test]
 fn stylizes_an_image_and_a_folder_of_frames_and_refuses_bad_input() {

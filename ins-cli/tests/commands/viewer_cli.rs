@@ -4,8 +4,7 @@
 //! that `render nerf --orbit` gives; the mesh as PLY and glTF, the glTF read back with an
 //! independent reader; the bad requests refused.
 
-mod common;
-use common::*;
+use crate::common::*;
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};

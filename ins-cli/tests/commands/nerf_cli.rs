@@ -1,8 +1,7 @@
 //! `ins-cli train/render/eval nerf` as a user meets them, on a small scene written by
 //! `ins-cli data synth`, and the bad inputs that must end in one clear message.
 
-mod common;
-use common::*;
+use crate::common::*;
 
 #[test]
 fn pretrain_render_eval_stylize_and_refuse_bad_input() {

@@ -3,8 +3,7 @@
 //! one before a plain backdrop, and `data sfm` refuses what it cannot pose with one clear
 //! message.
 
-mod common;
-use common::*;
+use crate::common::*;
 
 /// Held-out PSNR a 600-step small grid NeRF must reach on the synthetic room capture (objects
 /// on a tiled floor inside a dome three times farther out than the cameras, 40 views of 64×48

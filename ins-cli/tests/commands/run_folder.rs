@@ -3,14 +3,12 @@
 //! the first one's pid, and a failed checkpoint leaves the last good one loadable, ending with
 //! a clear error.
 
-mod common;
-
 use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{assert_clean_failure, ok, s};
+use crate::common::{assert_clean_failure, ok, s};
 
 fn train_args(out: &Path) -> Vec<String> {
     [
@@ -166,7 +164,7 @@ fn a_checkpoint_over_the_file_size_limit_keeps_the_last_good_one() {
     }
     let failed = output(limited);
     assert_clean_failure(&failed, "writing the checkpoint of step");
-    let e = common::stderr(&failed);
+    let e = crate::common::stderr(&failed);
     assert!(
         e.contains("File too large") && e.contains(good.trim()),
         "{e}"
@@ -177,7 +175,7 @@ fn a_checkpoint_over_the_file_size_limit_keeps_the_last_good_one() {
     // Without the limit the run continues from it to the end.
     ok(output(command(&out, &["--resume"])));
     let render = dir.path().join("r.png");
-    ok(common::cli(&[
+    ok(crate::common::cli(&[
         "render",
         "siren",
         "--run",

@@ -3,14 +3,12 @@
 //! any adapter gets one clear message saying what to do, at once, with nothing written; a step
 //! too large for the GPU gets one line naming it and the ways out, not an internal failure.
 
-mod common;
-
 use std::io::Read;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{assert_clean_failure, s, stderr};
+use crate::common::{assert_clean_failure, s, stderr};
 
 /// How long one wgpu run may take before it counts as a hang: with empty caches lavapipe
 /// compiles every kernel on the CPU (minutes), and `scripts/test.sh` runs two test programs
@@ -72,7 +70,7 @@ fn logged_losses(run: &Path) -> Vec<(u64, f64)> {
 #[test]
 fn nerf_trains_on_wgpu_as_on_flex() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = common::synth_scene(dir.path(), "blender", 32, 8);
+    let scene = crate::common::synth_scene(dir.path(), "blender", 32, 8);
     // The first wgpu run of a fresh machine compiles and tunes every kernel (minutes on
     // lavapipe); the limit fails the test rather than hanging CI.
     let [flex, wgpu] = losses_on_flex_and_wgpu(
@@ -115,7 +113,7 @@ fn nerf_trains_on_wgpu_as_on_flex() {
 #[test]
 fn idr_trains_on_wgpu_as_on_flex() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = common::synth_scene(dir.path(), "dtu", 24, 8);
+    let scene = crate::common::synth_scene(dir.path(), "dtu", 24, 8);
     // Sphere tracing evaluates the SDF's hash grid many times a step: on wgpu one CubeCL kernel
     // each time. The same initial parameters and rays on both backends; three steps, so the
     // loss logged at the last one follows two updates. (Over more steps a ray grazing the
@@ -199,7 +197,7 @@ fn wgpu_without_an_adapter_says_so_at_once_and_writes_nothing() {
 #[test]
 fn a_step_too_large_for_the_gpu_is_told_once_with_the_ways_out() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = common::synth_scene(dir.path(), "blender", 32, 8);
+    let scene = crate::common::synth_scene(dir.path(), "blender", 32, 8);
     let out = dir.path().join("run");
     // 65536 rays of up to 512 samples: lavapipe refuses the MLP's launch ("Cube count too big");
     // a GPU with room trains it. Either way the run never ends as an internal failure.

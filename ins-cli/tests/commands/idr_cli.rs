@@ -2,8 +2,7 @@
 //! written by `ins-cli data synth`, and the bad inputs that must end in one clear message with
 //! nothing written over.
 
-mod common;
-use common::*;
+use crate::common::*;
 
 #[test]
 fn train_render_eval_export_and_refuse_bad_input() {

@@ -5,8 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-mod common;
-use common::*;
+use crate::common::*;
 
 /// A pretrained (about ten seconds) and a stylized NeRF run on a 32 px synthetic Blender scene.
 fn stylized_run(dir: &Path) -> PathBuf {

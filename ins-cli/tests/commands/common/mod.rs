@@ -1,6 +1,5 @@
 //! What every CLI test does: run `ins-cli` (no GPU probing), read its stderr, and check that a
 //! failure is one clear message, never a panic.
-#![allow(dead_code)] // each test file uses its own subset
 
 use std::path::Path;
 use std::process::{Command, Output};
