@@ -7,13 +7,13 @@ program cargo builds is a job, or one job per module for the two programs made o
 (`tests/tests/library`, `ins-cli/tests/commands`: a module is what a program used to be), in
 one of two lanes:
 
-- the lavapipe lane runs the programs that compile GPU kernels, one after another: Mesa keeps
-  each kernel's LLVM code on disk, so a program finds those the one before it compiled (with
-  empty caches on an Intel Xeon, 2 cores: wgpu_steps alone 605 s, then wgpu_cli 118 s where it
-  took 605 s when the two started side by side);
+- the lavapipe lane runs the jobs that compile GPU kernels, one after another and in the
+  order LAVAPIPE gives: CubeCL keeps its tuning decisions and Mesa each kernel's LLVM code on
+  disk, so a job finds what the one before it compiled (empty caches, AMD EPYC Zen 3:
+  wgpu_cli 220 s after wgpu_steps; started first, cold, it ran past its 1800 s limit);
 - the CPU lane runs the others, slowest first.
 
-The lavapipe lane starts while cargo is still building, as soon as one of its programs is
+The lavapipe lane starts while cargo is still building, as soon as the next job in its order is
 linked (the last minutes of a build are the test programs, one core's worth); the CPU lane
 starts when the build is done. A lane whose own jobs are finished takes the other lane's.
 
