@@ -10,8 +10,8 @@
 //! picked on these CPUs); the SIREN's `sin(ω·z)` op, the SDF networks' softplus and slope ops and
 //! Adam's update, whose AVX-512 loops the emulated CPUs run 8 lanes wide (Haswell) or 4 (Nehalem),
 //! bit for bit the same; the hash grid's lookup, Jacobian and both table gradients, whose
-//! AVX-512 loops the emulated CPUs replace by the scalar ones, bit for bit the same; and the
-//! Gram-matrix op.
+//! AVX-512 loops (16 points at a time) the emulated CPUs replace by the AVX2 ones (8, Haswell)
+//! or the scalar ones (Nehalem), bit for bit the same; and the Gram-matrix op.
 //!
 //! A test binary without the libtest harness (`harness = false`): run with the environment
 //! variable below, it is the child that computes and writes its numbers.
@@ -47,7 +47,7 @@ const CPUS: &[(&str, &[&str], &[&str])] = &[
 /// Kernels agree to rounding: different kernels sum in different orders.
 const TOLERANCE: f32 = 1e-4;
 /// The element-wise kernels (sine, softplus, Adam), compiled once per vector width from one
-/// loop, and the hash grid (16 points at a time with AVX-512, one at a time without) agree
+/// loop, and the hash grid (16 points at a time with AVX-512, 8 with AVX2, else one) agree
 /// exactly: the same arithmetic in the same order, whatever the width.
 const ELEMENT_WISE: &[&str] = &["sine", "softplus", "adam", "hash_grid"];
 

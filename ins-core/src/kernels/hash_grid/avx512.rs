@@ -170,7 +170,7 @@ fn points(what: &str, layout: &Layout, columns: &[f32], per_point: usize, given:
 }
 
 /// Checks that `table` holds every row's two features.
-fn table_covers(what: &str, layout: &Layout, table: &[f32]) {
+pub(super) fn table_covers(what: &str, layout: &Layout, table: &[f32]) {
     assert!(
         table.len() >= 2 * layout.total_rows(),
         "{what}: table of {} values",
@@ -179,7 +179,7 @@ fn table_covers(what: &str, layout: &Layout, table: &[f32]) {
 }
 
 /// Checks that `grad` holds level `l`'s rows.
-fn level_covered(what: &str, layout: &Layout, l: usize, grad: &[f32]) {
+pub(super) fn level_covered(what: &str, layout: &Layout, l: usize, grad: &[f32]) {
     assert!(
         grad.len() >= 2 * layout.rows[l],
         "{what}: level gradient of {} values",
@@ -539,6 +539,3 @@ unsafe fn jacobian_scatter(
     }
     full
 }
-
-#[cfg(test)]
-mod tests;

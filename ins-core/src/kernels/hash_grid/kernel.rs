@@ -10,7 +10,7 @@
 //! vectors trilinearly. A level whose `(N_l + 1)³` vertices fit the table is stored densely
 //! (`x + y·(N_l+1) + z·(N_l+1)²`); finer levels hash (`x ⊕ 2654435761·y ⊕ 805459861·z mod T`).
 
-use super::avx512;
+use super::vector;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -204,8 +204,8 @@ const CHUNK: usize = 1024;
 /// The lookups are random, so cache decides the speed: each thread takes a contiguous share of
 /// the points and runs level by level over all of them, so one level's table stays in the
 /// core's cache for a whole pass. Results go to a level-major scratch buffer (contiguous
-/// writes) that is transposed into `out` at the end. Two-feature grids run 16 points at a
-/// time through [`avx512`] where the CPU has it.
+/// writes) that is transposed into `out` at the end. Two-feature grids run 16 or 8 points at
+/// a time through [`vector`] where the CPU has AVX-512 or AVX2.
 pub fn forward(layout: &Layout, table: &[f32], positions: &[f32], out: &mut [f32]) {
     let (levels, nf) = (layout.levels(), layout.features);
     let n = positions.len() / 3;
@@ -216,11 +216,11 @@ pub fn forward(layout: &Layout, table: &[f32], positions: &[f32], out: &mut [f32
         .into_par_iter()
         .zip(positions.par_chunks(3 * share))
         .for_each(|(mut parts, pos)| {
-            let columns = avx512::usable(nf).then(|| avx512::columns(pos));
+            let columns = vector::loops(nf).map(|v| (v, vector::columns(pos)));
             for (l, dst) in parts.iter_mut().enumerate() {
                 let done = columns
                     .as_ref()
-                    .map_or(0, |c| avx512::encode_level(layout, l, table, c, dst));
+                    .map_or(0, |(v, c)| (v.encode_level)(layout, l, table, c, dst));
                 let rest = dst.chunks_exact_mut(nf).zip(pos.chunks_exact(3)).skip(done);
                 for (d, p) in rest {
                     let (rows, w) = layout.corner_weights(l, p);
@@ -357,7 +357,7 @@ pub fn backward_table(
                 }
             }
         });
-    let columns = avx512::usable(nf).then(|| avx512::columns(positions));
+    let columns = vector::loops(nf).map(|v| (v, vector::columns(positions)));
     level_slices(layout, grad_table)
         .into_par_iter()
         .zip(by_level.par_chunks(n * nf))
@@ -366,7 +366,7 @@ pub fn backward_table(
             let off = layout.offset[l];
             let done = columns
                 .as_ref()
-                .map_or(0, |c| avx512::scatter_level(layout, l, c, go, g));
+                .map_or(0, |(v, c)| (v.scatter_level)(layout, l, c, go, g));
             let rest = positions
                 .chunks_exact(3)
                 .zip(go.chunks_exact(nf))
@@ -432,18 +432,16 @@ pub fn backward_positions(
 }
 
 /// The spatial Jacobian `∂out/∂p` into `jac` (`n·L·F·3`, the 3 axes last); two-feature grids
-/// 16 points at a time through [`avx512`] where the CPU has it.
+/// 16 or 8 points at a time through [`vector`] where the CPU has AVX-512 or AVX2.
 pub fn jacobian(layout: &Layout, table: &[f32], positions: &[f32], jac: &mut [f32]) {
     let (levels, nf) = (layout.levels(), layout.features);
     let width = levels * nf * 3;
     jac.par_chunks_mut(width * CHUNK)
         .zip(positions.par_chunks(3 * CHUNK))
         .for_each(|(jac, pos)| {
-            let done = if avx512::usable(nf) {
-                avx512::jacobian_points(layout, table, &avx512::columns(pos), jac)
-            } else {
-                0
-            };
+            let done = vector::loops(nf).map_or(0, |v| {
+                (v.jacobian_points)(layout, table, &vector::columns(pos), jac)
+            });
             for (i, (j, p)) in jac
                 .chunks_exact_mut(width)
                 .zip(pos.chunks_exact(3))
@@ -484,14 +482,14 @@ pub fn jacobian_backward_table(
 ) {
     let (levels, nf) = (layout.levels(), layout.features);
     let width = levels * nf * 3;
-    let columns = avx512::usable(nf).then(|| avx512::columns(positions));
+    let columns = vector::loops(nf).map(|v| (v, vector::columns(positions)));
     level_slices(layout, grad_table)
         .into_par_iter()
         .enumerate()
         .for_each(|(l, g)| {
             let off = layout.offset[l];
-            let done = columns.as_ref().map_or(0, |c| {
-                avx512::jacobian_scatter_level(layout, l, c, grad_jac, g)
+            let done = columns.as_ref().map_or(0, |(v, c)| {
+                (v.jacobian_scatter_level)(layout, l, c, grad_jac, g)
             });
             let rest = positions
                 .chunks_exact(3)
