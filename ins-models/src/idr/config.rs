@@ -5,7 +5,7 @@ use std::path::Path;
 use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
-use super::model::{IdrArch, SdfKind, SdfRenderer};
+use super::model::{DEFAULT_GRID_TABLE, IdrArch, SdfKind, SdfRenderer};
 use super::volume::VolumeSampling;
 use crate::run::args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};
 
@@ -24,6 +24,13 @@ pub const VOLUME_CURVATURE_WEIGHT: f64 = 0.1;
 
 fn no_curvature() -> Option<f64> {
     Some(0.0)
+}
+
+/// Finest resolution of the volume renderer's appearance grid (see `--color-grid`).
+pub const VOLUME_COLOR_GRID: u32 = 2047;
+
+fn no_color_grid() -> Option<u32> {
+    Some(0)
 }
 
 /// Everything that defines an IDR run, pretraining (`--scene`) or stylization (`--from`).
@@ -103,17 +110,24 @@ pub struct IdrRunConfig {
     /// 512 → 19.87; at 400×300 a 2047 level (2^19 table) gave 15.81 dB where 512 gave 17.68.
     #[arg(long, default_value_t = 512)]
     pub grid_max_resolution: u32,
+    /// `grid` SDF: log2 of the hash table's entries per level (up to 19). Levels finer than
+    /// the table (from about 50 cells across at 2^17) share entries between cells.
+    #[arg(long, default_value_t = DEFAULT_GRID_TABLE)]
+    pub grid_table: u32,
     /// Width of the colour network's hidden layers (`grid` SDF). On scan37 at 200×150, 128 with a
     /// 512 grid gave 19.87 dB held-out masked PSNR where 64 with a 1024 grid gave 18.23.
     #[arg(long, default_value_t = 128)]
     pub color_width: usize,
-    /// Finest resolution of an appearance hash grid in the colour network (0: none): texture
-    /// finer than the SDF's grid, which has to stay coarse for smooth normals, can hold. Its
-    /// 16.8 M parameters make a step about a seventh longer (94 against 82 ms on scan37 at
-    /// 400×300); on the full schedule it ended at 20.19 dB held-out with IoU 0.979, against the
-    /// defaults' 19.98 and 0.990 (docs/measurements.md).
-    #[arg(long, default_value_t = 0)]
-    pub color_grid: u32,
+    /// Finest resolution of an appearance hash grid in the colour network (0: none; default:
+    /// the volume renderer 2047, the surface renderer none): texture finer than the SDF's grid,
+    /// which has to stay coarse for smooth normals, can hold. Its 16.8 M parameters make a run
+    /// folder about 350 MB instead of 80 and a volume step about an eighth longer; on scan37 the
+    /// volume's defaults gained 0.5 dB held out with it (21.47 / 21.35 dB against 20.95 / 20.77
+    /// over two seeds, IoU unchanged), where the surface's ended level without it
+    /// (docs/measurements.md). (A run folder written before it was a default says what it had.)
+    #[arg(long)]
+    #[serde(default = "no_color_grid")]
+    pub color_grid: Option<u32>,
     /// Weight of the mask loss (0: the renderer's own: IDR's 100 on its sharpening
     /// closest-approach term; 1 on the volume's opacity cross-entropy, where NeuS's 0.1 left a
     /// blurred band outside scan37's silhouette, IoU 0.89 after 1000 steps).
@@ -172,8 +186,9 @@ impl IdrRunConfig {
             sdf: self.sdf,
             radius: self.init_radius,
             grid_max_resolution: self.grid_max_resolution,
+            grid_table: self.grid_table,
             color_width: self.color_width,
-            color_grid: self.color_grid,
+            color_grid: self.color_grid_for(),
             renderer: self.renderer,
             background: self.no_mask && self.renderer == SdfRenderer::Volume,
         }
@@ -203,6 +218,15 @@ impl IdrRunConfig {
             (w, _) if w > 0.0 => w,
             (_, SdfRenderer::Surface) => 100.0,
             (_, SdfRenderer::Volume) => VOLUME_MASK_WEIGHT,
+        }
+    }
+
+    /// Finest resolution of the colour network's appearance grid (0: none).
+    pub fn color_grid_for(&self) -> u32 {
+        match (self.color_grid, self.renderer) {
+            (Some(r), _) => r,
+            (None, SdfRenderer::Surface) => 0,
+            (None, SdfRenderer::Volume) => VOLUME_COLOR_GRID,
         }
     }
 
@@ -298,6 +322,13 @@ mod tests {
         assert_eq!(fresh.mask_rays_for(), VOLUME_MASK_RAYS);
         assert_eq!(fresh.rays_for(), 512);
         assert_eq!(fresh.steps_for(RunKind::Pretrain), 6000);
+        assert_eq!(fresh.arch().color_grid, VOLUME_COLOR_GRID);
+        assert_eq!(fresh.arch().grid_table, DEFAULT_GRID_TABLE);
+        let surface = IdrRunConfig {
+            renderer: SdfRenderer::Surface,
+            ..IdrRunConfig::default()
+        };
+        assert_eq!(surface.arch().color_grid, 0);
         let unmasked = IdrRunConfig {
             no_mask: true,
             ..IdrRunConfig::default()
@@ -312,5 +343,15 @@ mod tests {
         assert_eq!(old.rays_for(), 2048);
         assert_eq!(old.steps_for(RunKind::Pretrain), 12000);
         assert_eq!(old.holdout, 8);
+        assert_eq!(old.arch().color_grid, 0);
+        assert_eq!(old.arch().grid_table, DEFAULT_GRID_TABLE);
+        // A volume run folder from before the appearance grid was its default kept none.
+        let volume: IdrRunConfig =
+            serde_json::from_str(r#"{"scene": "/scan37", "renderer": "volume", "color_grid": 0}"#)
+                .unwrap();
+        assert_eq!(volume.arch().color_grid, 0);
+        let without: IdrRunConfig =
+            serde_json::from_str(r#"{"scene": "/scan37", "renderer": "volume"}"#).unwrap();
+        assert_eq!(without.arch().color_grid, 0);
     }
 }

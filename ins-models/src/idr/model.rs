@@ -148,6 +148,9 @@ pub struct IdrArch {
     pub radius: f64,
     /// `grid`: finest hash-encoding resolution.
     pub grid_max_resolution: u32,
+    /// `grid`: log2 of the hash encoding's entries per level.
+    #[serde(default = "default_grid_table")]
+    pub grid_table: u32,
     /// Hidden width of the colour network (`grid`; the `mlp` SDF keeps IDR's).
     pub color_width: usize,
     /// Finest resolution of the colour network's appearance grid (0: none).
@@ -162,11 +165,18 @@ pub struct IdrArch {
     pub background: bool,
 }
 
+/// The SDF grid's table before it could be chosen (run folders without `grid_table`).
+pub const DEFAULT_GRID_TABLE: u32 = 17;
+
+fn default_grid_table() -> u32 {
+    DEFAULT_GRID_TABLE
+}
+
 impl IdrArch {
     /// The `grid` SDF's hash encoding.
     fn hash_grid(&self) -> HashGridConfig {
         HashGridConfig::new()
-            .with_log2_table(17)
+            .with_log2_table(self.grid_table)
             .with_base_resolution(16)
             .with_max_resolution(self.grid_max_resolution)
     }
@@ -190,10 +200,12 @@ impl IdrArch {
                 .map_err(|e| format!("--color-grid {}: {e}", self.color_grid))?;
         }
         match self.sdf {
-            SdfKind::Grid => self
-                .hash_grid()
-                .validate()
-                .map_err(|e| format!("--grid-max-resolution {}: {e}", self.grid_max_resolution)),
+            SdfKind::Grid => self.hash_grid().validate().map_err(|e| {
+                format!(
+                    "--grid-max-resolution {} --grid-table {}: {e}",
+                    self.grid_max_resolution, self.grid_table
+                )
+            }),
             SdfKind::Mlp => Ok(()),
         }
     }

@@ -142,6 +142,7 @@ mod tests {
                 sdf: SdfKind::Grid,
                 radius: 0.5,
                 grid_max_resolution: 64,
+                grid_table: crate::idr::model::DEFAULT_GRID_TABLE,
                 color_width: 16,
                 color_grid: 0,
                 renderer: SdfRenderer::Volume,
