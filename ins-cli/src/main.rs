@@ -6,6 +6,7 @@ mod common;
 mod consistency_cmd;
 mod counter;
 mod data_cmd;
+mod eval_mesh_cmd;
 mod export_cmd;
 mod idr_cmd;
 mod nerf_cmd;
@@ -113,6 +114,9 @@ enum EvalVariant {
     /// depth), against the per-view 2D baseline; Gram and content distances per view; the
     /// painting's texture on the object against Gatys run to convergence.
     Consistency(consistency_cmd::EvalConsistency),
+    /// A NeRF or IDR run's mesh against a reference surface (DTU's ground-truth points, a
+    /// synthesized scene's): accuracy, completeness, Chamfer distance, F-score.
+    Mesh(eval_mesh_cmd::EvalMesh),
 }
 
 #[derive(Subcommand, Debug)]
@@ -148,6 +152,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> anyhow::Result<()> {
             EvalVariant::Nerf(a) => nerf_cmd::eval(a),
             EvalVariant::Idr(a) => idr_cmd::eval(a),
             EvalVariant::Consistency(a) => consistency_cmd::run(a),
+            EvalVariant::Mesh(a) => eval_mesh_cmd::run(a),
         },
         Command::Stylize(a) => stylize_cmd::run(a),
         Command::View(a) => view_cmd::run(a),

@@ -9,7 +9,8 @@
 //!   (SIREN, or a user's own content module).
 //! - [`stylize2d`]: classic 2D style transfer of one image, and the per-view baseline.
 //! - [`consistency`]: a stylized 3D run evaluated along a camera path.
-//! - [`mesh_export`]: a 3D run's surface as PLY or glTF; [`video`]: frames as GIF, MP4 or PNGs.
+//! - [`mesh_export`]: a 3D run's surface as PLY or glTF; [`mesh_score`]: that surface against a
+//!   reference (Chamfer distance, F-score); [`video`]: frames as GIF, MP4 or PNGs.
 
 // Burn's `slice` takes one range per dimension, so `[a..b]` on a 1-D tensor is the idiom.
 #![allow(clippy::single_range_in_vec_init)]
@@ -20,6 +21,7 @@ pub mod demo;
 pub mod idr;
 pub mod image_task;
 pub mod mesh_export;
+pub mod mesh_score;
 pub mod nerf;
 pub mod run;
 pub mod siren;

@@ -1,6 +1,6 @@
-//! `ins-cli train/render/eval idr` and `export mesh` as a user meets them, on a small DTU scene
-//! written by `ins-cli data synth`, and the bad inputs that must end in one clear message with
-//! nothing written over.
+//! `ins-cli train/render/eval idr`, `export mesh` and `eval mesh` as a user meets them, on a
+//! small DTU scene written by `ins-cli data synth`, and the bad inputs that must end in one
+//! clear message with nothing written over.
 
 use crate::common::*;
 
@@ -127,6 +127,41 @@ fn train_render_eval_export_and_refuse_bad_input() {
         "{head}"
     );
     assert!(head.contains("property uchar red"), "{head}");
+
+    // The mesh scored against the true surface `data synth` wrote beside the photos, in the
+    // world frame's units (the scene is written at 30 times the unit sphere).
+    let reference = scene.join("reference.ply");
+    let o = ok(cli(&[
+        "eval",
+        "mesh",
+        "--run",
+        s(&run),
+        "--reference",
+        s(&reference),
+        "--resolution",
+        "32",
+        "--samples",
+        "5000",
+    ]));
+    let score: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&o.stdout).trim()).unwrap();
+    let f = |k: &str| score[k].as_f64().unwrap_or_else(|| panic!("{k}: {score}"));
+    assert!((f("units_per_scene_unit") - 30.0).abs() < 1e-3, "{score}");
+    assert!((f("max_distance") - 3.0).abs() < 1e-3, "{score}");
+    assert!(f("reference_points") > 1000.0, "{score}");
+    assert!((0.0..=1.0).contains(&f("fscore")), "{score}");
+    assert!(
+        f("chamfer") > 0.0 && f("chamfer") < f("max_distance"),
+        "{score}"
+    );
+    // A reference that is missing or not a PLY: one message naming the file.
+    let missing = dir.path().join("no_such_reference.ply");
+    let corrupt = dir.path().join("corrupt_reference.ply");
+    std::fs::write(&corrupt, "not a point cloud").unwrap();
+    for bad in [&missing, &corrupt] {
+        let o = cli(&["eval", "mesh", "--run", s(&run), "--reference", s(bad)]);
+        assert_clean_failure(&o, bad.file_name().unwrap().to_str().unwrap());
+    }
 
     // Bad input: a forward-facing scene, a scene without masks, a NeRF run, an absurd
     // resolution.

@@ -8,6 +8,7 @@
 
 mod analytic;
 mod capture_writers;
+mod reference_surface;
 mod writers;
 
 pub use analytic::*;

@@ -248,6 +248,34 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
     })
 }
 
+/// The file [`write_dtu_of`] writes the true surface to (world frame), for `eval mesh`.
+pub const REFERENCE_SURFACE: &str = "reference.ply";
+
+/// Spacing (local units, the unit sphere's) of the reference surface's points: a 400-pixel
+/// view of the unit sphere spends about 0.005 a pixel, so this is about two pixels.
+const REFERENCE_SPACING: f32 = 0.01;
+
+/// Writes the part of `scene`'s foreground surface that `views` see as a PLY point cloud in
+/// the world frame ([`REFERENCE_SURFACE`]).
+fn write_reference_surface(
+    scene: &AnalyticScene,
+    views: &[SynthView],
+    dir: &Path,
+) -> Result<(), DataError> {
+    let world: Vec<Vec3> = scene
+        .foreground_surface(REFERENCE_SPACING)
+        .into_iter()
+        .map(|p| scene.to_world.apply_point(p))
+        .collect();
+    let cameras: Vec<Camera> = views.iter().map(|v| v.camera.clone()).collect();
+    let seen: Vec<glam::DVec3> = scene
+        .seen_by(&world, &cameras)
+        .into_iter()
+        .map(|p| p.as_dvec3())
+        .collect();
+    crate::data::ply_points::write_ply_points(&dir.join(REFERENCE_SURFACE), &seen)
+}
+
 /// DTU / IDR: [`AnalyticScene::tabletop`] (unit-sphere frame, objects foreground, ground not)
 /// placed by `scale_mat` (×30, shifted) in a world frame; cameras 2.6 units from the centre on
 /// an arc above the table, with skewed, off-centre intrinsics; `world_mat_i = 1.7 · K·[R | t]`
@@ -359,6 +387,7 @@ pub fn write_dtu_of(
         views.push(SynthView::new(camera, Split::Train, image_path, render));
     }
     write_npz(&dir.join("cameras.npz"), &arrays)?;
+    write_reference_surface(&scene, &views, dir)?;
     Ok(SynthScene {
         format: SceneFormat::Dtu,
         dir: dir.to_path_buf(),
