@@ -115,9 +115,10 @@ pub struct IdrRunConfig {
     /// finer than the SDF's grid, which has to stay coarse for smooth normals, can hold. Its
     /// 16.8 M parameters make a volume step about 15 % longer, a run folder about 350 MB
     /// instead of 80 and the peak memory 0.8 GB instead of 0.45. On scan37 the volume's
-    /// defaults with 2047 reached 21.47 / 21.35 dB held out over two seeds against 20.95 /
-    /// 20.77 without (IoU the same or better); stylized, those bases carried 0.72 / 0.92 of the
-    /// painting's texture (0.91 from the seed-1 base without it) (docs/measurements.md).
+    /// defaults with 2047 reached 21.47 / 21.35 dB held out over seeds 0 / 1 against 20.82 /
+    /// 20.77 without (IoU the same or better), but stylized, those bases carried 0.72 / 0.92 of
+    /// the painting's texture against 0.96 / 0.91 without: a choice for reconstructions that
+    /// will not be stylized, so not the default (docs/measurements.md).
     #[arg(long, default_value_t = 0)]
     pub color_grid: u32,
     /// Weight of the mask loss (0: the renderer's own: IDR's 100 on its sharpening
