@@ -181,6 +181,7 @@ pub fn write_blender(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, Data
                 .map_err(|e| DataError::json(&path, e.to_string()))?;
         std::fs::write(&path, text).map_err(|e| DataError::io(&path, e))?;
     }
+    write_reference_surface(&scene, &views, dir)?;
     Ok(SynthScene {
         format: SceneFormat::Blender,
         dir: dir.to_path_buf(),
@@ -248,7 +249,8 @@ pub fn write_llff(dir: &Path, opts: &SynthOptions) -> Result<SynthScene, DataErr
     })
 }
 
-/// The file [`write_dtu_of`] writes the true surface to (world frame), for `eval mesh`.
+/// The file [`write_dtu_of`] and [`write_blender`] write the true surface to (world frame),
+/// for `eval mesh`.
 pub const REFERENCE_SURFACE: &str = "reference.ply";
 
 /// Spacing (local units, the unit sphere's) of the reference surface's points: a 400-pixel
