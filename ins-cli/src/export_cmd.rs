@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use ins_models::mesh_export::{MeshFormat, export_mesh};
+use ins_models::mesh_export::{MeshFormat, MeshFrame, export_mesh};
 use ins_models::run::MeshOptions;
 
 use crate::common::DeviceArgs;
@@ -27,6 +27,11 @@ pub struct ExportMesh {
     /// File format (default: from --out's extension).
     #[arg(long, value_enum)]
     format: Option<MeshFormat>,
+    /// Coordinates: `scene` (the run's own: DTU's unit sphere, a capture recentred) or `world`
+    /// (the dataset's, its cameras': DTU's millimetres, a COLMAP model's frame), to lay the mesh
+    /// over the dataset's own points or ground truth.
+    #[arg(long, value_enum, default_value_t = MeshFrame::Scene)]
+    frame: MeshFrame,
     /// Output .ply or .glb.
     #[arg(long)]
     out: PathBuf,
@@ -41,7 +46,15 @@ pub fn run(a: ExportMesh) -> Result<()> {
         resolution: a.resolution,
         level: a.level,
     };
-    let summary = export_mesh(&a.run, options, a.mix.as_deref(), format, &a.out, &device)?;
+    let summary = export_mesh(
+        &a.run,
+        options,
+        a.mix.as_deref(),
+        format,
+        a.frame,
+        &a.out,
+        &device,
+    )?;
     println!("{summary}");
     Ok(())
 }

@@ -12,7 +12,7 @@ use serde_json::Value;
 
 use ins_models::consistency::evaluate::{BASELINE_STEPS, FRAMES, REFERENCE_STEPS, REFERENCE_VIEWS};
 use ins_models::consistency::{ConsistencyOptions, StylizedPair, evaluate};
-use ins_models::mesh_export::{MeshFormat, export_mesh};
+use ins_models::mesh_export::{MeshFormat, MeshFrame, export_mesh};
 use ins_models::run::MeshOptions;
 
 #[derive(Args, Debug)]
@@ -257,7 +257,15 @@ fn report_mesh(run: &Path, out: &Path, device: &burn::prelude::Device) -> Result
         resolution: REPORT_MESH_RESOLUTION,
         level: None,
     };
-    let summary = export_mesh(run, options, None, MeshFormat::Glb, &glb, device)?;
+    let summary = export_mesh(
+        run,
+        options,
+        None,
+        MeshFormat::Glb,
+        MeshFrame::Scene,
+        &glb,
+        device,
+    )?;
     let bytes = std::fs::read(&glb).with_context(|| format!("reading {}", glb.display()))?;
     use base64::Engine as _;
     let js = format!(

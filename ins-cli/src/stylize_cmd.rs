@@ -24,7 +24,7 @@ use clap::Args;
 use ins_core::imaging::RgbImage;
 use ins_models::consistency::ConsistencyOptions;
 use ins_models::idr::{Idr, IdrRunConfig};
-use ins_models::mesh_export::{MeshFormat, export_mesh};
+use ins_models::mesh_export::{MeshFormat, MeshFrame, export_mesh};
 use ins_models::nerf::{Nerf, NerfRunConfig};
 use ins_models::run::scene::load_scene;
 use ins_models::run::{MeshOptions, RunKind};
@@ -469,7 +469,15 @@ pub fn run(a: Stylize) -> Result<()> {
             // neither would a finer grid, and the report has said why.
             let glb = renders.join("stylized.glb");
             if report.join("mesh.glb").is_file() {
-                if let Err(e) = export_mesh(&stylized, mesh, None, MeshFormat::Glb, &glb, &device) {
+                if let Err(e) = export_mesh(
+                    &stylized,
+                    mesh,
+                    None,
+                    MeshFormat::Glb,
+                    MeshFrame::Scene,
+                    &glb,
+                    &device,
+                ) {
                     eprintln!("no mesh: {e:#}");
                 }
             }

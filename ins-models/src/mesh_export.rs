@@ -6,6 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::mesh::Mesh;
+use ins_scene::geometry::{Similarity, Vec3};
 
 use crate::run::any::load_scene_run;
 use crate::run::scene_render::MeshOptions;
@@ -41,32 +42,62 @@ impl MeshFormat {
     }
 }
 
+/// The coordinates a mesh is written in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum MeshFrame {
+    /// The run's own frame (DTU's unit sphere; a capture recentred and rescaled), where the
+    /// viewer and the report look at it.
+    #[default]
+    Scene,
+    /// The dataset's frame, its cameras' (DTU's millimetres, a COLMAP model's): to lay the mesh
+    /// over the dataset's own points or ground truth.
+    World,
+}
+
+/// `mesh` and its up direction moved from the scene frame back into the dataset's world frame
+/// by the inverse of `to_scene`.
+fn into_world(mesh: &mut Mesh, up: &mut Vec3, to_scene: &Similarity) {
+    let back = to_scene.inverse();
+    for v in &mut mesh.vertices {
+        *v = back.apply_point(Vec3::from_array(*v)).to_array();
+    }
+    for n in &mut mesh.normals {
+        *n = back.apply_direction(Vec3::from_array(*n)).to_array();
+    }
+    *up = back.apply_direction(*up);
+}
+
 /// Extracts the surface of the NeRF or IDR run in `run_dir` (colours under `mix`) and writes it
-/// to `out` as `format`; returns the summary `export mesh` prints: counts, area, volume,
-/// seconds, and for NeRF the density level and box.
+/// to `out` as `format` in `frame`; returns the summary `export mesh` prints: counts, area and
+/// volume (in `frame`'s units), seconds, and for NeRF the density level and box.
 pub fn export_mesh(
     run_dir: &Path,
     options: MeshOptions,
     mix: Option<&[f32]>,
     format: MeshFormat,
+    frame: MeshFrame,
     out: &Path,
     device: &Device,
 ) -> Result<serde_json::Value> {
     crate::idr::mesh::check_resolution(options.resolution)?;
     let run = load_scene_run(run_dir, device, "a mesh")?;
     let code = run.code(mix, device)?;
-    let m = run.mesh(options, code, device)?;
+    let mut m = run.mesh(options, code, device)?;
     if m.mesh.triangles.is_empty() {
         bail!(
             "{}: the surface is empty at this level (nothing to mesh)",
             run_dir.display()
         );
     }
+    if frame == MeshFrame::World {
+        into_world(&mut m.mesh, &mut m.up, &run.scene().to_scene);
+    }
     write_mesh(&m.mesh, &m.colors, m.up.to_array(), format, out)?;
     let mut info = m.info;
     let summary = serde_json::json!({
         "mesh": out,
         "format": format!("{format:?}").to_lowercase(),
+        "frame": format!("{frame:?}").to_lowercase(),
         "vertices": m.mesh.vertices.len(),
         "triangles": m.mesh.triangles.len(),
         "area": m.mesh.area(),

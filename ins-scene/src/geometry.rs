@@ -228,6 +228,16 @@ impl Similarity {
         self.rotation * d
     }
 
+    /// The map back: `inverse().apply_point(apply_point(p)) == p`.
+    pub fn inverse(&self) -> Self {
+        let rotation = self.rotation.transpose();
+        Similarity {
+            scale: 1.0 / self.scale,
+            rotation,
+            translation: -(rotation * self.translation) / self.scale,
+        }
+    }
+
     /// Builds one from a 3×4 affine matrix `[A | t]` whose `A` is a scaled rotation; `None`
     /// when `A` is singular or not a similarity (tolerance 1e-3 relative).
     pub fn from_affine(m: &[[f64; 4]; 3]) -> Option<Self> {
@@ -256,6 +266,20 @@ impl Similarity {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_similarity_and_its_inverse_undo_each_other() {
+        let m = [
+            [0.0, -2.0, 0.0, 1.0],
+            [2.0, 0.0, 0.0, -3.0],
+            [0.0, 0.0, 2.0, 0.5],
+        ];
+        let s = Similarity::from_affine(&m).unwrap();
+        let p = Vec3::new(0.3, -1.2, 4.0);
+        let back = s.inverse().apply_point(s.apply_point(p));
+        assert!((back - p).length() < 1e-5, "{back}");
+        assert!((s.inverse().scale - 0.5).abs() < 1e-6);
+    }
 
     #[test]
     #[allow(clippy::needless_range_loop)] // matrix entries by row and column

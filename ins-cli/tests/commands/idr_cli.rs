@@ -154,6 +154,43 @@ fn train_render_eval_export_and_refuse_bad_input() {
         f("chamfer") > 0.0 && f("chamfer") < f("max_distance"),
         "{score}"
     );
+    // The same mesh written in the dataset's frame is where `eval mesh` puts the run's own:
+    // scored against its vertices, every point of it lies within a tenth of the unit sphere.
+    let world_ply = dir.path().join("world.ply");
+    let o = ok(cli(&[
+        "export",
+        "mesh",
+        "--run",
+        s(&run),
+        "--resolution",
+        "32",
+        "--frame",
+        "world",
+        "--out",
+        s(&world_ply),
+    ]));
+    let exported: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(exported["frame"], "world");
+    let o = ok(cli(&[
+        "eval",
+        "mesh",
+        "--run",
+        s(&run),
+        "--reference",
+        s(&world_ply),
+        "--resolution",
+        "32",
+        "--samples",
+        "5000",
+        "--threshold",
+        "3",
+    ]));
+    let own: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&o.stdout).trim()).unwrap();
+    assert!(
+        own["precision"].as_f64().unwrap() > 0.99 && own["surface_outliers"] == 0.0,
+        "{own}"
+    );
     // A reference that is missing or not a PLY: one message naming the file.
     let missing = dir.path().join("no_such_reference.ply");
     let corrupt = dir.path().join("corrupt_reference.ply");
