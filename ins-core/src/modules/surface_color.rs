@@ -63,10 +63,36 @@ impl SurfaceColor {
     ) -> Tensor<2> {
         let v = FourierEncoding::new(self.dir_freqs).encode(dirs);
         let mut inputs = vec![x.clone(), normals, v, features];
-        if let Some(grid) = &self.grid {
-            inputs.push(grid.forward(x.mul_scalar(0.5).add_scalar(0.5)));
+        if let Some(g) = self.grid_features(x) {
+            inputs.push(g);
         }
         self.mlp.forward(Tensor::cat(inputs, 1))
+    }
+
+    /// The appearance grid's features at `x [N, 3]` (inside `[-1, 1]³`), `None` without one.
+    pub fn grid_features(&self, x: Tensor<2>) -> Option<Tensor<2>> {
+        self.grid
+            .as_ref()
+            .map(|grid| grid.forward(x.mul_scalar(0.5).add_scalar(0.5)))
+    }
+
+    /// Width of [`Self::grid_features`] (0 without a grid).
+    pub fn d_grid(&self) -> usize {
+        self.grid.as_ref().map_or(0, HashGrid::d_out)
+    }
+
+    /// As [`Self::forward`], with the SDF's features and the grid's given together
+    /// (`[N, F + d_grid]`, as a stylizer blended them) instead of the grid's read at `x`.
+    pub fn forward_blended(
+        &self,
+        x: Tensor<2>,
+        normals: Tensor<2>,
+        dirs: Tensor<2>,
+        features_and_grid: Tensor<2>,
+    ) -> Tensor<2> {
+        let v = FourierEncoding::new(self.dir_freqs).encode(dirs);
+        self.mlp
+            .forward(Tensor::cat(vec![x, normals, v, features_and_grid], 1))
     }
 }
 
@@ -99,5 +125,27 @@ mod tests {
         let g = color.grid.as_ref().unwrap().table.val().grad(&grads);
         let g = g.expect("the grid's table has a gradient");
         assert!(g.abs().sum().into_scalar::<f32>() > 0.0);
+    }
+
+    #[test]
+    fn the_grid_given_with_the_features_colours_as_the_grid_read_inside() {
+        let d = Device::flex();
+        d.seed(5);
+        let grid = HashGridConfig::new()
+            .with_log2_table(10)
+            .with_base_resolution(4)
+            .with_max_resolution(32);
+        let color = SurfaceColorConfig::new(5).with_grid(Some(grid)).init(&d);
+        let n = 8;
+        let x = Tensor::<2>::random([n, 3], Distribution::Uniform(-1.0, 1.0), &d);
+        let normals = Tensor::<2>::random([n, 3], Distribution::Default, &d);
+        let dirs = Tensor::<2>::random([n, 3], Distribution::Default, &d);
+        let f = Tensor::<2>::random([n, 5], Distribution::Default, &d);
+        let inside = color.forward(x.clone(), normals.clone(), dirs.clone(), f.clone());
+        let g = color.grid_features(x.clone()).unwrap();
+        assert_eq!(g.dims()[1], color.d_grid());
+        let given = color.forward_blended(x, normals, dirs, Tensor::cat(vec![f, g], 1));
+        let diff = (inside - given).abs().max().into_scalar::<f32>();
+        assert!(diff < 1e-6, "{diff}");
     }
 }

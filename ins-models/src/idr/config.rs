@@ -26,6 +26,13 @@ fn no_curvature() -> Option<f64> {
     Some(0.0)
 }
 
+/// Finest resolution of the volume renderer's appearance grid (see `--color-grid`).
+pub const VOLUME_COLOR_GRID: u32 = 2047;
+
+fn no_color_grid() -> Option<u32> {
+    Some(0)
+}
+
 /// Everything that defines an IDR run, pretraining (`--scene`) or stylization (`--from`).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, clap::Args)]
 #[serde(default)]
@@ -111,16 +118,23 @@ pub struct IdrRunConfig {
     /// 512 grid gave 19.87 dB held-out masked PSNR where 64 with a 1024 grid gave 18.23.
     #[arg(long, default_value_t = 128)]
     pub color_width: usize,
-    /// Finest resolution of an appearance hash grid in the colour network (0: none): texture
-    /// finer than the SDF's grid, which has to stay coarse for smooth normals, can hold. Its
-    /// 16.8 M parameters make a volume step about 15 % longer, a run folder about 350 MB
-    /// instead of 80 and the peak memory 0.8 GB instead of 0.45. On scan37 the volume's
-    /// defaults with 2047 reached 21.47 / 21.35 dB held out over seeds 0 / 1 against 20.82 /
-    /// 20.77 without (IoU the same or better), but stylized, those bases carried 0.72 / 0.92 of
-    /// the painting's texture against 0.96 / 0.91 without: a choice for reconstructions that
-    /// will not be stylized, so not the default (docs/measurements.md).
-    #[arg(long, default_value_t = 0)]
-    pub color_grid: u32,
+    /// Finest resolution of an appearance hash grid in the colour network (0: none; default:
+    /// the volume renderer 2047, the surface renderer none): texture finer than the SDF's grid,
+    /// which has to stay coarse for smooth normals, can hold. Its 16.8 M parameters make a run
+    /// folder about 350 MB instead of 80, the peak memory about 0.9 GB instead of 0.5 and a
+    /// volume step about an eighth longer. On scan37 the volume's defaults gained 0.5 dB held
+    /// out with it (21.47 / 21.35 dB against 20.82 / 20.77 over seeds 0 / 1, IoU the same or
+    /// better), and a stylization blends the grid's features with the style
+    /// (docs/measurements.md). (A run folder written before it was a default says what it had.)
+    #[arg(long)]
+    #[serde(default = "no_color_grid")]
+    pub color_grid: Option<u32>,
+    /// Whether a stylization's AM blends the appearance grid's features with the SDF's, not
+    /// only the SDF's: set when stylizing a base with a grid (since the thirty-fourth session;
+    /// the grid's photo texture reached the colour untouched before, and a folder from then
+    /// reads as not).
+    #[arg(skip)]
+    pub stylize_color_grid: bool,
     /// Weight of the mask loss (0: the renderer's own: IDR's 100 on its sharpening
     /// closest-approach term; 1 on the volume's opacity cross-entropy, where NeuS's 0.1 left a
     /// blurred band outside scan37's silhouette, IoU 0.89 after 1000 steps).
@@ -181,7 +195,7 @@ impl IdrRunConfig {
             grid_max_resolution: self.grid_max_resolution,
             grid_table: self.grid_table,
             color_width: self.color_width,
-            color_grid: self.color_grid,
+            color_grid: self.color_grid_for(),
             renderer: self.renderer,
             background: self.no_mask && self.renderer == SdfRenderer::Volume,
         }
@@ -211,6 +225,15 @@ impl IdrRunConfig {
             (w, _) if w > 0.0 => w,
             (_, SdfRenderer::Surface) => 100.0,
             (_, SdfRenderer::Volume) => VOLUME_MASK_WEIGHT,
+        }
+    }
+
+    /// Finest resolution of the colour network's appearance grid (0: none).
+    pub fn color_grid_for(&self) -> u32 {
+        match (self.color_grid, self.renderer) {
+            (Some(r), _) => r,
+            (None, SdfRenderer::Surface) => 0,
+            (None, SdfRenderer::Volume) => VOLUME_COLOR_GRID,
         }
     }
 
@@ -306,8 +329,13 @@ mod tests {
         assert_eq!(fresh.mask_rays_for(), VOLUME_MASK_RAYS);
         assert_eq!(fresh.rays_for(), 512);
         assert_eq!(fresh.steps_for(RunKind::Pretrain), 6000);
-        assert_eq!(fresh.arch().color_grid, 0);
+        assert_eq!(fresh.arch().color_grid, VOLUME_COLOR_GRID);
         assert_eq!(fresh.arch().grid_table, DEFAULT_GRID_TABLE);
+        let surface = IdrRunConfig {
+            renderer: SdfRenderer::Surface,
+            ..IdrRunConfig::default()
+        };
+        assert_eq!(surface.arch().color_grid, 0);
         let unmasked = IdrRunConfig {
             no_mask: true,
             ..IdrRunConfig::default()
@@ -324,5 +352,15 @@ mod tests {
         assert_eq!(old.holdout, 8);
         assert_eq!(old.arch().color_grid, 0);
         assert_eq!(old.arch().grid_table, DEFAULT_GRID_TABLE);
+        // A stylized folder from before the AM blended the appearance grid reads as not.
+        assert!(!old.stylize_color_grid);
+        // A volume run folder from before the appearance grid was its default kept none.
+        let volume: IdrRunConfig =
+            serde_json::from_str(r#"{"scene": "/scan37", "renderer": "volume", "color_grid": 0}"#)
+                .unwrap();
+        assert_eq!(volume.arch().color_grid, 0);
+        let without: IdrRunConfig =
+            serde_json::from_str(r#"{"scene": "/scan37", "renderer": "volume"}"#).unwrap();
+        assert_eq!(without.arch().color_grid, 0);
     }
 }

@@ -152,6 +152,7 @@ impl Variant for Idr {
         cfg.eikonal_points = Some(cfg.eikonal_points_for());
         cfg.eval_every = Some(cfg.eval_every_for());
         cfg.curvature_weight = Some(cfg.curvature_weight_for());
+        cfg.color_grid = Some(cfg.color_grid_for());
     }
 
     fn inherit(cfg: &mut IdrRunConfig, base: &IdrRunConfig, from: &Path) -> Result<()> {
@@ -169,7 +170,8 @@ impl Variant for Idr {
         cfg.init_radius = base.init_radius;
         // The model's parts follow how it was pretrained (a volume run has a sharpness).
         cfg.renderer = base.renderer;
-        cfg.color_grid = base.color_grid;
+        cfg.color_grid = Some(base.color_grid_for());
+        cfg.stylize_color_grid = base.color_grid_for() > 0;
         cfg.grid_table = base.grid_table;
         Ok(())
     }
@@ -188,6 +190,7 @@ impl Variant for Idr {
             n_styles,
             cfg.sim_width_for(),
             &cfg.stylizer.position(),
+            cfg.stylize_color_grid,
             device,
         )
     }

@@ -59,6 +59,9 @@ fn small_scene_config(scene: std::path::PathBuf) -> IdrRunConfig {
         // finer 1024 grid with the 64-wide colour network (the earlier defaults) reaches 15.0 dB.
         grid_max_resolution: 1024,
         color_width: 64,
+        // The volume's appearance grid (2047 cells across) holds texture finer than a 400×300
+        // capture's pixels; this scene has none finer than the SDF's grid.
+        color_grid: Some(0),
         ..Default::default()
     };
     cfg.source.scene = Some(scene);
