@@ -144,11 +144,20 @@ impl IdrTask {
         50.0 * 2f32.powi((step / fifth).min(5) as i32)
     }
 
-    /// A pretraining batch of rays: `mask_rays`'s share inside the masks, the rest uniform.
-    fn pretrain_batch(&self, seed: u64) -> Result<ins_scene::rays::RayBatch> {
+    /// A pretraining batch of rays: `mask_rays`'s share inside the masks, the rest uniform;
+    /// with that share, each ray's weight in the mask term
+    /// ([`MaskedPixels::uniform_weights`]: the silhouette as uniform rays would set it).
+    fn pretrain_batch(&self, seed: u64) -> Result<(ins_scene::rays::RayBatch, Option<Vec<f32>>)> {
         Ok(match &self.mask_rays {
-            Some((share, index)) => index.sample(&self.scene, self.rays, *share, seed)?,
-            None => RaySampler::new(self.rays, seed).sample(&self.scene, Split::Train)?,
+            Some((share, index)) => {
+                let batch = index.sample(&self.scene, self.rays, *share, seed)?;
+                let weights = index.uniform_weights(&self.scene, &batch, *share);
+                (batch, Some(weights))
+            }
+            None => (
+                RaySampler::new(self.rays, seed).sample(&self.scene, Split::Train)?,
+                None,
+            ),
         })
     }
 
@@ -167,7 +176,7 @@ impl IdrTask {
         } else {
             model
         };
-        let batch = self.pretrain_batch(seed)?;
+        let (batch, mask_weights) = self.pretrain_batch(seed)?;
         let r = batch.len();
         let out = render_volume(
             model,
@@ -204,8 +213,16 @@ impl IdrTask {
             let o = opacity.clamp(1e-3, 1.0 - 1e-3);
             let bce = (gt.clone() * o.clone().log()
                 + gt.neg().add_scalar(1.0) * o.neg().add_scalar(1.0).log())
-            .neg()
-            .mean();
+            .neg();
+            let bce = match mask_weights {
+                Some(w) => {
+                    let total = w.iter().sum::<f32>().max(f32::MIN_POSITIVE);
+                    (bce * Tensor::<1>::from_floats(w.as_slice(), &self.device))
+                        .sum()
+                        .div_scalar(total)
+                }
+                None => bce.mean(),
+            };
             terms = terms.term("mask", bce);
         }
         // Eikonal: every sample inside the unit sphere, and random points of its box.
@@ -262,7 +279,7 @@ impl IdrTask {
         if self.renderer == SdfRenderer::Volume {
             return self.pretrain_volume_losses(model, step, seed);
         }
-        let batch = self.pretrain_batch(seed)?;
+        let (batch, mask_weights) = self.pretrain_batch(seed)?;
         let r = batch.len();
         let out = render_surface(
             model,
@@ -333,7 +350,18 @@ impl IdrTask {
                 // BCE with logits, stable form: max(z, 0) − z·y + log(1 + e^{−|z|}).
                 let bce = logits.clone().clamp_min(0.0) - logits.clone() * gt
                     + logits.abs().neg().exp().add_scalar(1.0).log();
-                let bce = sum_counted(bce.reshape([m]), outside.len());
+                let bce = match &mask_weights {
+                    // Padding weighs nothing here too.
+                    Some(w) => {
+                        let mut wo: Vec<f32> = outside.iter().map(|&i| w[i]).collect();
+                        wo.resize(m, 0.0);
+                        let mean_weight = w.iter().sum::<f32>() / r as f32;
+                        (bce.reshape([m]) * Tensor::<1>::from_floats(wo.as_slice(), &self.device))
+                            .sum()
+                            .div_scalar(mean_weight.max(f32::MIN_POSITIVE))
+                    }
+                    None => sum_counted(bce.reshape([m]), outside.len()),
+                };
                 terms = terms.term("mask", bce.div_scalar(alpha * r as f32));
             } else {
                 terms = terms.term("mask", Tensor::<1>::zeros([1], &self.device));
