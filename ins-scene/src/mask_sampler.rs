@@ -143,7 +143,12 @@ mod tests {
         assert!(w.iter().all(|&w| w > 0.0 && w.is_finite()));
         // Uniform rays weigh alike.
         let u = index.sample(&scene, 100, 0.0, 9).unwrap();
-        assert!(index.uniform_weights(&scene, &u, 0.0).iter().all(|&w| w == 1.0));
+        assert!(
+            index
+                .uniform_weights(&scene, &u, 0.0)
+                .iter()
+                .all(|&w| w == 1.0)
+        );
         // Same seed, same rays.
         assert_eq!(
             index.sample(&scene, 50, 0.5, 3).unwrap(),
