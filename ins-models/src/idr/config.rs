@@ -118,7 +118,8 @@ pub struct IdrRunConfig {
     #[arg(long, default_value_t = DEFAULT_GRID_TABLE)]
     pub grid_table: u32,
     /// Width of the colour network's hidden layers (`grid` SDF). On scan37 at 200×150, 128 with a
-    /// 512 grid gave 19.87 dB held-out masked PSNR where 64 with a 1024 grid gave 18.23.
+    /// 512 grid gave 19.87 dB held-out masked PSNR where 64 with a 1024 grid gave 18.23; at
+    /// 400×300 with the volume's defaults 256 gave 21.43 dB against 21.40, a step 13 % longer.
     #[arg(long, default_value_t = 128)]
     pub color_width: usize,
     /// Finest resolution of an appearance hash grid in the colour network (0: none; default:
