@@ -7,7 +7,8 @@
 //! - [`render`]: sphere tracing and IDR's differentiable surface point.
 //! - [`volume`]: the SDF rendered as a volume (NeuS), the other way to pretrain;
 //!   [`volume_view`]: whole views rendered that way, the clear rays skipped.
-//! - [`task`]: the losses ([`smoothness`]: the volume's curvature term); [`run`]: pretraining, stylizing, loading runs.
+//! - [`task`]: the losses ([`smoothness`]: the volume's curvature term);
+//!   [`run`]: pretraining, stylizing, loading runs.
 //! - [`eval`]: silhouette IoU and PSNR inside the mask; [`mesh`]: marching-cubes export.
 //! - [`scene_render`]: an IDR run as the shared 3D interface (frames, meshes).
 
