@@ -262,13 +262,14 @@ fn train_render_eval_export_and_refuse_bad_input() {
     assert_clean_failure(&o, "--grid-max-resolution 5000");
     assert!(!too_fine.join("config.json").exists());
     // So are a colour grid or an SDF table out of range, a share of rays that is not one, a
-    // learning-rate decay that is not a fraction and a smoothness weight without the volume
-    // renderer.
+    // learning-rate decay that is not a fraction, no rounds of drawing samples and a
+    // smoothness weight without the volume renderer.
     for (args, refused) in [
         (&["--color-grid", "4096"][..], "--color-grid 4096"),
         (&["--grid-table", "20"][..], "--grid-table 20"),
         (&["--mask-rays", "1.5"][..], "--mask-rays 1.5"),
         (&["--lr-decay", "0"][..], "--lr-decay 0"),
+        (&["--upsample-rounds", "0"][..], "--upsample-rounds 0"),
         (
             &["--curvature-weight", "0.5", "--renderer", "surface"][..],
             "--curvature-weight 0.5",

@@ -6,7 +6,7 @@ use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
 use super::model::{DEFAULT_GRID_TABLE, IdrArch, SdfKind, SdfRenderer};
-use super::volume::VolumeSampling;
+use super::volume::{UPSAMPLE_ROUNDS, VolumeSampling, one_round};
 use crate::run::args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};
 
 /// Weight of the volume renderer's mask term (see `--mask-weight`).
@@ -88,6 +88,15 @@ pub struct IdrRunConfig {
     /// pass spends most of its time.
     #[arg(long, default_value_t = 16)]
     pub fine_samples: usize,
+    /// Volume renderer: rounds of drawing the fine samples (NeuS's up-sampling). Each round but
+    /// the last looks at the SDF alone at its samples, and the next draws among all samples so
+    /// far at twice the sharpness, so the last round's (the fine pass's) sit in the surface's
+    /// band instead of across a coarse section. On scan37, 2 rounds gave 21.64 dB held out
+    /// against 21.29 with 1 (IoU 0.989 both) for a step no longer than the noise.
+    /// (A run folder written before the rounds existed drew once.)
+    #[arg(long, default_value_t = UPSAMPLE_ROUNDS)]
+    #[serde(default = "one_round")]
+    pub upsample_rounds: usize,
     /// Share of each pretraining batch drawn from inside the masks, the rest uniformly over
     /// the images (default: the surface renderer 0, as IDR; the volume renderer 0.5). About 60 %
     /// of scan37's uniform rays miss the object: they teach the silhouette and nothing of the
@@ -274,6 +283,7 @@ impl IdrRunConfig {
             coarse: self.samples,
             kept: self.kept_samples,
             fine: self.fine_samples,
+            rounds: self.upsample_rounds,
             ..VolumeSampling::default()
         }
     }
@@ -335,6 +345,7 @@ mod tests {
         assert_eq!(fresh.steps_for(RunKind::Pretrain), 6000);
         assert_eq!(fresh.arch().color_grid, VOLUME_COLOR_GRID);
         assert_eq!(fresh.arch().grid_table, DEFAULT_GRID_TABLE);
+        assert_eq!(fresh.volume_sampling().rounds, UPSAMPLE_ROUNDS);
         let surface = IdrRunConfig {
             renderer: SdfRenderer::Surface,
             ..IdrRunConfig::default()
@@ -366,5 +377,7 @@ mod tests {
         let without: IdrRunConfig =
             serde_json::from_str(r#"{"scene": "/scan37", "renderer": "volume"}"#).unwrap();
         assert_eq!(without.arch().color_grid, 0);
+        // ...and drew its fine samples in one round.
+        assert_eq!(without.volume_sampling().rounds, 1);
     }
 }

@@ -323,6 +323,12 @@ fn validate_pretraining(cfg: &IdrRunConfig) -> Result<()> {
             "--curvature-weight {curvature}: the smoothness term is the volume renderer's (add --renderer volume)"
         );
     }
+    if !(1..=8).contains(&cfg.upsample_rounds) {
+        bail!(
+            "--upsample-rounds {}: the fine samples are drawn in 1 to 8 rounds",
+            cfg.upsample_rounds
+        );
+    }
     if !(cfg.lr_decay > 0.0 && cfg.lr_decay <= 1.0) {
         bail!(
             "--lr-decay {}: the final learning rate is a fraction of the first, above 0 and at most 1",
