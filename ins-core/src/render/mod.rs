@@ -7,5 +7,6 @@ pub mod gather;
 pub mod occupancy;
 pub mod samplers;
 pub mod sdf_volume;
+pub mod sort_rows;
 pub mod sphere_tracing;
 pub mod volume;

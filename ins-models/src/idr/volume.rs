@@ -11,6 +11,7 @@ use ins_core::render::beyond_sphere::render_beyond_unit_sphere;
 use ins_core::render::gather::select_parallel;
 use ins_core::render::samplers::{draw_from_weights, stratified};
 use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
+use ins_core::render::sort_rows::{sort_rows, sort_rows_with_indices};
 use ins_core::shape_buckets::padded_size;
 use ins_scene::geometry::{Bounds, Vec3};
 use ins_scene::rays::{Rays, flatten};
@@ -256,11 +257,11 @@ fn fine_positions(
             .valid()
             .sdf(points(o, d, drawn.clone()))
             .reshape([r, opts.fine]);
-        let (sorted, order) = Tensor::cat(vec![z, drawn], 1).sort_with_indices(1);
+        let (sorted, order) = sort_rows_with_indices(Tensor::cat(vec![z, drawn], 1));
         f = Tensor::cat(vec![f, f_drawn], 1).gather(1, order);
         z = sorted;
     }
-    Tensor::cat(vec![kept, draw(last, &z, &f)], 1).sort(1)
+    sort_rows(Tensor::cat(vec![kept, draw(last, &z, &f)], 1))
 }
 
 /// Renders `rays` as a volume under each style of `codes` (`[S, n]`, or `None`), on `device`

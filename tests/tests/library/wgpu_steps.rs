@@ -323,6 +323,52 @@ fn fine_samples_drawn_from_weights_move_only_by_their_cdfs_rounding_on_wgpu() {
     );
 }
 
+/// Samples sorted along their rays on the device (CubeCL has no sort kernel; the rows are
+/// ranked by counting instead of read back) come out as the host sorts them, each index
+/// pointing at its value: rows of 80 with ties, as IDR's volume merges its drawn samples.
+#[test]
+fn ray_samples_sort_on_wgpu_as_on_the_host() {
+    use ins_core::render::sort_rows::sort_rows_with_indices;
+    let (rows, k) = (64usize, 80usize);
+    // Values on a coarse lattice (ties in every row) with a sorted first half, as a merge sees.
+    let x: Vec<f32> = (0..rows * k)
+        .map(|i| {
+            let (r, c) = (i / k, i % k);
+            if c < k / 2 {
+                c as f32 * 0.25
+            } else {
+                ((c * 37 + r * 11) % 53) as f32 * 0.125
+            }
+        })
+        .collect();
+    let on = {
+        let x = x.clone();
+        move |device: &Device| -> (Vec<f32>, Vec<i64>) {
+            let t = Tensor::<1>::from_floats(x.as_slice(), device).reshape([rows, k]);
+            let (sorted, order) = sort_rows_with_indices(t);
+            let order = order.into_data().convert::<i64>();
+            (values(sorted), order.try_to_vec::<i64>().unwrap())
+        }
+    };
+    let (flex, _) = on(&Device::flex());
+    let (wgpu, order) = ins_tests::within(ins_tests::WGPU_LIMIT_S, "sorting rows", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    assert_eq!(wgpu, flex, "the sorted rows differ from the host's");
+    for r in 0..rows {
+        let mut seen = vec![false; k];
+        for j in 0..k {
+            let from = order[r * k + j] as usize;
+            assert!(
+                from < k && !seen[from],
+                "row {r}: column {from} twice or outside"
+            );
+            seen[from] = true;
+            assert_eq!(x[r * k + from], wgpu[r * k + j], "row {r}, place {j}");
+        }
+    }
+}
+
 #[test]
 fn an_idr_stylization_step_has_the_same_loss_and_gradients_on_wgpu() {
     let dir = tempfile::tempdir().unwrap();
