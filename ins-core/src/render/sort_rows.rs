@@ -14,10 +14,11 @@ use crate::kernels::flex::on_flex;
 /// `x [R, K]` sorted ascending along each row.
 pub fn sort_rows(x: Tensor<2>) -> Tensor<2> {
     if on_flex(&x) {
-        x.sort(1)
-    } else {
-        sort_rows_by_rank(x, MAX_COMPARISONS).0
+        return x.sort(1);
     }
+    let x = x.detach();
+    let rank = ranks(&x, MAX_COMPARISONS);
+    to_ranks(x, rank)
 }
 
 /// `x [R, K]` sorted ascending along each row, with each sorted value's column in `x`
@@ -26,58 +27,68 @@ pub fn sort_rows_with_indices(x: Tensor<2>) -> (Tensor<2>, Tensor<2, Int>) {
     if on_flex(&x) {
         x.sort_with_indices(1)
     } else {
-        sort_rows_by_rank(x, MAX_COMPARISONS)
+        by_rank(x.detach(), MAX_COMPARISONS)
     }
 }
 
-/// The most comparisons [`sort_rows_by_rank`] holds at once (16 MB of 32-bit counts): a NeRF
-/// render's 8192 rays of 128 samples are ranked in 32 blocks of rows, not in one 0.5 GB
-/// buffer, which some adapters could not even allocate.
+/// The device path of [`sort_rows_with_indices`]: the values moved to their [`ranks`], and
+/// each place's column in `x`.
+fn by_rank(x: Tensor<2>, max_comparisons: usize) -> (Tensor<2>, Tensor<2, Int>) {
+    let [r, k] = x.dims();
+    let rank = ranks(&x, max_comparisons);
+    let columns = Tensor::<1, Int>::arange(0..k as i64, &x.device())
+        .reshape([1, k])
+        .expand([r, k]);
+    let order = Tensor::<2, Int>::zeros([r, k], &x.device()).scatter(
+        1,
+        rank.clone(),
+        columns,
+        IndexingUpdateOp::Add,
+    );
+    (to_ranks(x, rank), order)
+}
+
+/// The most comparisons [`ranks`] holds at once (16 MB of 32-bit counts): a NeRF render's
+/// 8192 rays of 128 samples are ranked in 32 blocks of rows, not in one 0.5 GB buffer, which
+/// some adapters could not even allocate.
 const MAX_COMPARISONS: usize = 1 << 22;
 
-/// The device path of [`sort_rows_with_indices`]: each value's rank in its row (values below
-/// it, and equal values in earlier columns, so the ranks are a permutation), then the values
-/// and their columns scattered to their ranks, a block of rows of at most `max_comparisons`
-/// at a time. NaNs have no rank; rows must not hold any.
-fn sort_rows_by_rank(x: Tensor<2>, max_comparisons: usize) -> (Tensor<2>, Tensor<2, Int>) {
+/// Each value's place in its sorted row `[R, K]`: the values of its row below it, and the
+/// equal values in earlier columns (so the places are a permutation), counted a block of rows
+/// of at most `max_comparisons` at a time. NaNs have no place; rows must not hold any.
+fn ranks(x: &Tensor<2>, max_comparisons: usize) -> Tensor<2, Int> {
     let [r, k] = x.dims();
-    let x = x.detach();
     let block = (max_comparisons / (k * k).max(1)).max(1);
     if r <= block {
-        return rank_block(x);
+        return block_ranks(x.clone());
     }
-    let (sorted, order): (Vec<_>, Vec<_>) = (0..r)
+    let blocks = (0..r)
         .step_by(block)
-        .map(|start| rank_block(x.clone().slice([start..(start + block).min(r), 0..k])))
-        .unzip();
-    (Tensor::cat(sorted, 0), Tensor::cat(order, 0))
+        .map(|start| block_ranks(x.clone().slice([start..(start + block).min(r), 0..k])))
+        .collect();
+    Tensor::cat(blocks, 0)
 }
 
-/// [`sort_rows_by_rank`] on rows that fit in one block.
-fn rank_block(x: Tensor<2>) -> (Tensor<2>, Tensor<2, Int>) {
+/// [`ranks`] of rows that fit in one block.
+fn block_ranks(x: Tensor<2>) -> Tensor<2, Int> {
     let [r, k] = x.dims();
-    let device = x.device();
     // [R, K, 1] against [R, 1, K]: entry (k, j) compares value j with value k.
     let this = x.clone().unsqueeze_dim::<3>(2);
-    let other = x.clone().unsqueeze_dim::<3>(1);
-    let columns = Tensor::<1, Int>::arange(0..k as i64, &device);
+    let other = x.unsqueeze_dim::<3>(1);
+    let columns = Tensor::<1, Int>::arange(0..k as i64, &this.device());
     let earlier = columns
         .clone()
         .reshape([1, 1, k])
-        .lower(columns.clone().reshape([1, k, 1]))
+        .lower(columns.reshape([1, k, 1]))
         .int();
     let below = other.clone().lower(this.clone()).int();
     let tied_before = other.equal(this).int() * earlier;
-    let rank = (below + tied_before).sum_dim(2).reshape([r, k]);
-    let sorted =
-        Tensor::<2>::zeros([r, k], &device).scatter(1, rank.clone(), x, IndexingUpdateOp::Add);
-    let order = Tensor::<2, Int>::zeros([r, k], &device).scatter(
-        1,
-        rank,
-        columns.reshape([1, k]).expand([r, k]),
-        IndexingUpdateOp::Add,
-    );
-    (sorted, order)
+    (below + tied_before).sum_dim(2).reshape([r, k])
+}
+
+/// The values of `x [R, K]` moved to their places `rank [R, K]` along each row.
+fn to_ranks(x: Tensor<2>, rank: Tensor<2, Int>) -> Tensor<2> {
+    Tensor::<2>::zeros(x.dims(), &x.device()).scatter(1, rank, x, IndexingUpdateOp::Add)
 }
 
 #[cfg(test)]
@@ -104,10 +115,10 @@ mod tests {
             [2.0, 2.0, 2.0, 2.0, 1e-7, 2.0, 2.0],
         ];
         let x = Tensor::<2>::from_floats(rows, &d);
-        let (sorted, order) = sort_rows_by_rank(x.clone(), MAX_COMPARISONS);
+        let (sorted, order) = by_rank(x.clone(), MAX_COMPARISONS);
         let (sorted, order) = (floats(sorted), ints(order));
         // Ranked in blocks of three rows and one: the same rows, the same indices.
-        let (blocks, block_order) = sort_rows_by_rank(x.clone(), 3 * 7 * 7);
+        let (blocks, block_order) = by_rank(x.clone(), 3 * 7 * 7);
         assert_eq!(floats(blocks), sorted);
         assert_eq!(ints(block_order), order);
         assert_eq!(sorted, floats(x.clone().sort(1)));

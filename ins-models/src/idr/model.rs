@@ -173,6 +173,22 @@ fn default_grid_table() -> u32 {
 }
 
 impl IdrArch {
+    /// A small volume-rendered grid SDF for unit tests (a 64 finest level, 16 wide colour, no
+    /// appearance grid, no background field); tests change what they need with `..`.
+    #[cfg(test)]
+    pub(crate) fn small_volume() -> Self {
+        IdrArch {
+            sdf: SdfKind::Grid,
+            radius: 0.5,
+            grid_max_resolution: 64,
+            grid_table: DEFAULT_GRID_TABLE,
+            color_width: 16,
+            color_grid: 0,
+            renderer: SdfRenderer::Volume,
+            background: false,
+        }
+    }
+
     /// The `grid` SDF's hash encoding.
     fn hash_grid(&self) -> HashGridConfig {
         HashGridConfig::new()
@@ -354,14 +370,10 @@ mod tests {
         let device = Device::flex();
         device.seed(2);
         let arch = IdrArch {
-            sdf: SdfKind::Grid,
-            radius: 0.5,
             grid_max_resolution: 32,
-            grid_table: DEFAULT_GRID_TABLE,
             color_width: 8,
             color_grid: 64,
-            renderer: SdfRenderer::Volume,
-            background: false,
+            ..IdrArch::small_volume()
         };
         let base = IdrModel::new(&arch, &device);
         let n = 6;

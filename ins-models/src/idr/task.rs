@@ -512,7 +512,7 @@ impl Task for IdrTask {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::idr::model::{IdrArch, SdfKind};
+    use crate::idr::model::IdrArch;
     use ins_core::modules::sdf::SdfNet;
 
     /// A held sharpness gets no gradient; the SDF rendered with it still does.
@@ -520,14 +520,9 @@ mod tests {
     fn a_held_sharpness_gets_no_gradient() {
         let device = Device::flex().autodiff();
         let arch = IdrArch {
-            sdf: SdfKind::Grid,
-            radius: 0.5,
             grid_max_resolution: 32,
-            grid_table: crate::idr::model::DEFAULT_GRID_TABLE,
             color_width: 8,
-            color_grid: 0,
-            renderer: SdfRenderer::Volume,
-            background: false,
+            ..IdrArch::small_volume()
         };
         let model = IdrModel::new(&arch, &device);
         let held = with_sharpness_held(&model);

@@ -176,6 +176,14 @@ fn points(origins: Tensor<2>, dirs: Tensor<2>, t: Tensor<2>) -> Tensor<2> {
     (o + d * t.reshape([r, n, 1]).expand([r, n, 3])).reshape([r * n, 3])
 }
 
+/// The SDF of `model` at positions `t [R, N]` along the rays `origins + t·dirs`: `[R, N]` (no
+/// gradient).
+fn sdf_along(model: &IdrModel, origins: &Tensor<2>, dirs: &Tensor<2>, t: Tensor<2>) -> Tensor<2> {
+    let [r, n] = t.dims();
+    let (o, d) = (origins.clone().inner(), dirs.clone().inner());
+    model.sdf.valid().sdf(points(o, d, t)).reshape([r, n])
+}
+
 /// The coarse pass: `opts.coarse` stratified positions `[R, C]` between `near` and `far`
 /// (jittered by `seed`, at bin centres without) and the SDF there `[R, C]` (no gradient).
 pub(super) fn coarse_pass(
@@ -187,15 +195,9 @@ pub(super) fn coarse_pass(
     opts: &VolumeSampling,
     seed: Option<u64>,
 ) -> (Tensor<2>, Tensor<2>) {
-    let [r] = near.dims();
     let c = opts.coarse.max(2);
     let coarse = stratified(near.clone().inner(), far.clone().inner(), c, seed);
-    let (o, d) = (origins.clone().inner(), dirs.clone().inner());
-    let f = model
-        .sdf
-        .valid()
-        .sdf(points(o, d, coarse.clone()))
-        .reshape([r, c]);
+    let f = sdf_along(model, origins, dirs, coarse.clone());
     (coarse, f)
 }
 
@@ -251,12 +253,7 @@ fn fine_positions(
     let last = opts.rounds.max(1) - 1;
     for round in 0..last {
         let drawn = draw(round, &z, &f);
-        let (o, d) = (origins.clone().inner(), dirs.clone().inner());
-        let f_drawn = model
-            .sdf
-            .valid()
-            .sdf(points(o, d, drawn.clone()))
-            .reshape([r, opts.fine]);
+        let f_drawn = sdf_along(model, origins, dirs, drawn.clone());
         let (sorted, order) = sort_rows_with_indices(Tensor::cat(vec![z, drawn], 1));
         f = Tensor::cat(vec![f, f_drawn], 1).gather(1, order);
         z = sorted;
@@ -470,24 +467,14 @@ fn composite_samples(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::idr::model::{DEFAULT_GRID_TABLE, IdrArch, SdfKind, SdfRenderer};
+    use crate::idr::model::IdrArch;
 
     /// Rays down the z axis through the fresh model's sphere of radius 0.5 (its SDF starts as
     /// `|x| − 0.5`): the fine samples of each, and where each meets the sphere.
     fn samples_on_sphere(rounds: usize) -> (Vec<Vec<f32>>, Vec<f32>) {
         let device = Device::flex();
         device.seed(3);
-        let arch = IdrArch {
-            sdf: SdfKind::Grid,
-            radius: 0.5,
-            grid_max_resolution: 64,
-            grid_table: DEFAULT_GRID_TABLE,
-            color_width: 16,
-            color_grid: 0,
-            renderer: SdfRenderer::Volume,
-            background: false,
-        };
-        let model = IdrModel::new(&arch, &device);
+        let model = IdrModel::new(&IdrArch::small_volume(), &device);
         let mut rays = Rays::default();
         let mut surface = Vec::new();
         for i in 0..6 {

@@ -126,7 +126,7 @@ pub fn render_volume_view(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::idr::model::{IdrArch, SdfKind, SdfRenderer};
+    use crate::idr::model::IdrArch;
     use crate::idr::volume::render_volume;
     use ins_scene::geometry::Vec3;
 
@@ -139,14 +139,8 @@ mod tests {
             let device = Device::flex();
             device.seed(5);
             let arch = IdrArch {
-                sdf: SdfKind::Grid,
-                radius: 0.5,
-                grid_max_resolution: 64,
-                grid_table: crate::idr::model::DEFAULT_GRID_TABLE,
-                color_width: 16,
-                color_grid: 0,
-                renderer: SdfRenderer::Volume,
                 background: background_field,
+                ..IdrArch::small_volume()
             };
             // The fresh model's sphere of radius 0.5, at a trained model's sharpness (s ≈ 200;
             // at the starting 20 the margin is 0.5 and no ray inside the unit sphere is clear).
