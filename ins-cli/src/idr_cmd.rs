@@ -6,7 +6,6 @@ use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use clap::{ArgMatches, Args};
 use ins_core::imaging::RgbImage;
-use ins_core::render::sphere_tracing::TraceOptions;
 use ins_models::idr::eval::{evaluate_views, mean_scores, render_camera};
 use ins_models::idr::{Idr, IdrRun, IdrRunConfig};
 use ins_models::run::RunKind;
@@ -97,14 +96,14 @@ pub fn render(a: RenderIdr) -> Result<()> {
     let code = run.code(a.mix.as_deref(), &device)?;
     let size = a.size.as_deref().map(parse_size).transpose()?;
     let model = run.model.valid();
-    let trace = TraceOptions::default();
+    let opts = run.config.view_options();
     let shoot = |camera: &Camera| -> Result<RgbImage> {
         let r = render_camera(
             &model,
             &run.scene(),
             &crate::view_size::resized(camera, size),
             code.clone(),
-            &trace,
+            &opts,
             &device,
         )?;
         Ok(if a.normals {
@@ -173,7 +172,7 @@ pub fn eval(a: EvalIdr) -> Result<()> {
         run.scene(),
         &views,
         code,
-        &TraceOptions::default(),
+        &run.config.view_options(),
         &device,
     )?;
     for e in &evals {

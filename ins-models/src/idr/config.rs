@@ -5,9 +5,11 @@ use std::path::Path;
 use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
+use super::eval::ViewOptions;
 use super::model::{DEFAULT_GRID_TABLE, IdrArch, SdfKind, SdfRenderer};
 use super::volume::{UPSAMPLE_ROUNDS, VolumeSampling, one_round};
 use crate::run::args::{RunKind, ScheduleArgs, SourceArgs, StyleArgs, StylizerArgs};
+use ins_core::render::sphere_tracing::TraceOptions;
 
 /// Weight of the volume renderer's mask term (see `--mask-weight`).
 pub const VOLUME_MASK_WEIGHT: f64 = 1.0;
@@ -288,6 +290,14 @@ impl IdrRunConfig {
         }
     }
 
+    /// How the run's views are rendered: the default tracer and the run's volume samples.
+    pub fn view_options(&self) -> ViewOptions {
+        ViewOptions {
+            trace: TraceOptions::default(),
+            sampling: self.volume_sampling(),
+        }
+    }
+
     /// Steps to run.
     pub fn steps_for(&self, kind: RunKind) -> usize {
         match (self.schedule.steps, kind) {
@@ -379,5 +389,34 @@ mod tests {
         assert_eq!(without.arch().color_grid, 0);
         // ...and drew its fine samples in one round.
         assert_eq!(without.volume_sampling().rounds, 1);
+        assert_eq!(without.view_options().sampling.rounds, 1);
+    }
+
+    /// Views are rendered with the samples the run trained with, and a run stylizing a base
+    /// renders the base's frozen surface with the base's samples, not the defaults.
+    #[test]
+    fn views_render_with_the_samples_the_surface_was_trained_with() {
+        use crate::run::Variant;
+        let base = IdrRunConfig {
+            samples: 32,
+            kept_samples: 4,
+            fine_samples: 24,
+            upsample_rounds: 3,
+            ..IdrRunConfig::default()
+        };
+        let sampling = base.view_options().sampling;
+        assert_eq!(
+            (
+                sampling.coarse,
+                sampling.kept,
+                sampling.fine,
+                sampling.rounds
+            ),
+            (32, 4, 24, 3)
+        );
+        let mut stylized = IdrRunConfig::default();
+        super::super::run::Idr::inherit(&mut stylized, &base, std::path::Path::new("/base"))
+            .unwrap();
+        assert_eq!(stylized.view_options(), base.view_options());
     }
 }

@@ -25,6 +25,18 @@ pub const CHUNK: usize = 16384;
 /// Rays per chunk of a volume render: each carries its samples' forward-mode gradients.
 const VOLUME_CHUNK: usize = 4096;
 
+/// How a whole view is rendered: the tracer that finds the surface (normals, depth, and the
+/// colour of a surface-rendered model) and the samples of a volume-rendered model's colour and
+/// silhouette. A run renders with its own settings ([`super::config::IdrRunConfig::view_options`]):
+/// a model trained at other samples than the defaults is evaluated at those it trained with.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ViewOptions {
+    /// Sphere tracing.
+    pub trace: TraceOptions,
+    /// Volume samples (models pretrained as a volume).
+    pub sampling: VolumeSampling,
+}
+
 /// A rendered view: colour, silhouette and shaded normals.
 #[derive(Debug, Clone)]
 pub struct SurfaceView {
@@ -80,7 +92,7 @@ pub fn render_rays(
     width: usize,
     height: usize,
     code: Option<Tensor<2>>,
-    trace: &TraceOptions,
+    opts: &ViewOptions,
     device: &Device,
 ) -> Result<SurfaceView> {
     let n = rays.len();
@@ -103,14 +115,22 @@ pub fn render_rays(
             near: rays.near[start..end].to_vec(),
             far: rays.far[start..end].to_vec(),
         };
-        let out = render_surface(model, &chunk, code.clone(), [0.0; 3], trace, false, device);
+        let out = render_surface(
+            model,
+            &chunk,
+            code.clone(),
+            [0.0; 3],
+            &opts.trace,
+            false,
+            device,
+        );
         if volume {
             let (rgb, opacity) = render_volume_view(
                 model,
                 &chunk,
                 code.clone(),
                 [0.0; 3],
-                &VolumeSampling::default(),
+                &opts.sampling,
                 device,
             );
             view.rgb.extend(rgb);
@@ -139,7 +159,7 @@ pub fn render_camera(
     scene: &Scene,
     camera: &Camera,
     code: Option<Tensor<2>>,
-    trace: &TraceOptions,
+    opts: &ViewOptions,
     device: &Device,
 ) -> Result<SurfaceView> {
     let rays = camera_rays(camera, |o, d| scene.ray_range(o, d));
@@ -149,7 +169,7 @@ pub fn render_camera(
         camera.width as usize,
         camera.height as usize,
         code,
-        trace,
+        opts,
         device,
     )
 }
@@ -210,7 +230,7 @@ pub fn evaluate_views(
     scene: &Scene,
     views: &[usize],
     code: Option<Tensor<2>>,
-    trace: &TraceOptions,
+    opts: &ViewOptions,
     device: &Device,
 ) -> Result<Vec<SurfaceEval>> {
     let mut out = Vec::new();
@@ -219,7 +239,7 @@ pub fn evaluate_views(
             .views
             .get(view)
             .ok_or_else(|| anyhow::anyhow!("view {view} does not exist"))?;
-        let render = render_camera(model, scene, &v.camera, code.clone(), trace, device)?;
+        let render = render_camera(model, scene, &v.camera, code.clone(), opts, device)?;
         let photo = v.image.to_f32();
         let mask: Vec<bool> = match &v.mask {
             Some(m) => m.data.iter().map(|&b| b >= 128).collect(),

@@ -173,6 +173,11 @@ impl Variant for Idr {
         cfg.color_grid = Some(base.color_grid_for());
         cfg.stylize_color_grid = base.color_grid_for() > 0;
         cfg.grid_table = base.grid_table;
+        // The frozen surface is rendered with the samples that resolved it.
+        cfg.samples = base.samples;
+        cfg.kept_samples = base.kept_samples;
+        cfg.fine_samples = base.fine_samples;
+        cfg.upsample_rounds = base.upsample_rounds;
         Ok(())
     }
 
@@ -221,7 +226,7 @@ impl Variant for Idr {
                 )?;
                 let style = SurfaceStylization { perceptual, patch };
                 let views = scene.split(Split::Val).to_vec();
-                Ok(IdrTask::new(
+                let mut task = IdrTask::new(
                     scene,
                     cfg.rays_for(),
                     cfg.schedule.steps,
@@ -231,7 +236,9 @@ impl Variant for Idr {
                     views,
                     folder.val_dir(),
                     device,
-                ))
+                );
+                task.sampling = cfg.volume_sampling();
+                Ok(task)
             }
         }
     }
@@ -294,7 +301,7 @@ impl Variant for Idr {
             &task.scene,
             &views,
             code,
-            &task.trace,
+            &task.view_options(),
             device,
         )?;
         save_pictures(&evals[..evals.len().min(6)], &folder.final_picture())?;

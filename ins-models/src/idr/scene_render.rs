@@ -3,7 +3,6 @@
 
 use anyhow::{Result, bail};
 use burn::prelude::*;
-use ins_core::render::sphere_tracing::TraceOptions;
 use ins_scene::camera::Camera;
 use ins_scene::data::Scene;
 use ins_scene::paths::scene_up;
@@ -28,7 +27,7 @@ impl SceneRender for IdrRun {
             self.scene(),
             cam,
             code,
-            &TraceOptions::default(),
+            &self.config.view_options(),
             device,
         )?;
         let rays = ins_scene::rays::camera_rays(cam, |o, d| self.scene().ray_range(o, d));

@@ -17,7 +17,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::eval::{evaluate_views, mean_scores, save_pictures};
+use super::eval::{ViewOptions, evaluate_views, mean_scores, save_pictures};
 use super::model::{IdrModel, SdfRenderer};
 use super::render::render_surface;
 use super::smoothness::gradient_change;
@@ -125,6 +125,14 @@ impl IdrTask {
             sampling: VolumeSampling::default(),
             curvature_points: 0,
             device: device.clone(),
+        }
+    }
+
+    /// How evaluation renders whole views: the task's tracer and volume samples.
+    pub fn view_options(&self) -> ViewOptions {
+        ViewOptions {
+            trace: self.trace,
+            sampling: self.sampling,
         }
     }
 
@@ -492,7 +500,7 @@ impl Task for IdrTask {
             &self.scene,
             &self.eval_views,
             code,
-            &self.trace,
+            &self.view_options(),
             &device,
         )?;
         save_pictures(
