@@ -88,6 +88,20 @@ fn flex_from(values: Vec<f32>, shape: impl Into<burn::backend::Shape>) -> FlexTe
     FlexTensor::from_data(TensorData::new(values, shape.into()))
 }
 
+/// A table's gradient, zeroed by all threads: it is tens of MB (the colour grid's 16.8 M
+/// floats), and one thread's memset left the other cores idle for a few ms every step.
+fn zeroed_table(layout: &kernel::Layout) -> Vec<f32> {
+    use rayon::prelude::*;
+    let n = layout.total_rows() * layout.features;
+    let mut g: Vec<f32> = Vec::with_capacity(n);
+    g.spare_capacity_mut()
+        .par_chunks_mut(1 << 16)
+        .for_each(|c| c.fill(std::mem::MaybeUninit::new(0.0)));
+    // SAFETY: all `n` elements of the capacity were written above.
+    unsafe { g.set_len(n) };
+    g
+}
+
 fn rows(t: &impl TensorMetadata) -> usize {
     t.shape()[0]
 }
@@ -109,7 +123,7 @@ impl HashGridOps for Flex {
         shape: GridShape,
     ) -> FlexTensor {
         let layout = shape.layout();
-        let mut g = vec![0.0; layout.total_rows() * layout.features];
+        let mut g = zeroed_table(&layout);
         flex_values(&positions, |p| {
             flex_values(&grad_out, |go| {
                 kernel::backward_table(&layout, p, go, &mut g)
@@ -157,7 +171,7 @@ impl HashGridOps for Flex {
         shape: GridShape,
     ) -> FlexTensor {
         let layout = shape.layout();
-        let mut g = vec![0.0; layout.total_rows() * layout.features];
+        let mut g = zeroed_table(&layout);
         flex_values(&positions, |p| {
             flex_values(&grad_jac, |gj| {
                 kernel::jacobian_backward_table(&layout, p, gj, &mut g)

@@ -25,6 +25,18 @@ impl Dual {
         }
     }
 
+    /// The output layer `[.., 1 + F]`: values of all columns, tangents of the distance's
+    /// alone (the gradient is all [`Dual::split`] reads; the features' tangents were a matmul
+    /// and its backward for nothing).
+    pub(super) fn output(self, l: &Linear) -> Self {
+        let w = l.weight.val();
+        let [d_in, _] = w.dims();
+        Self {
+            h: dense(l, self.h),
+            t: self.t.matmul(w.slice([0..d_in, 0..1])),
+        }
+    }
+
     pub(super) fn softplus(self) -> Self {
         let [n, d] = self.h.dims();
         let slope = softplus_slope(self.h.clone(), BETA);

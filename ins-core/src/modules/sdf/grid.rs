@@ -90,10 +90,13 @@ impl SdfGrid {
         let device = x.device();
         let u = self.unit(x.clone());
         let enc = self.grid.forward(u.clone());
-        let jac = self.grid.jacobian(u).div_scalar(2.0 * self.bound); // [N, L·F, 3]
+        let jac = self.grid.jacobian(u); // ∂enc/∂u [N, L·F, 3], u = x / scale + ½
         let e = enc.dims()[1];
-        // Tangent k: [e_k, ∂enc/∂x_k].
-        let eye = Tensor::<2>::eye(3, &device); // [3, 3]
+        // Tangents along u rather than x, `[scale·e_k, ∂enc/∂u_k]` = scale × `[e_k, ∂enc/∂x_k]`,
+        // divided back out of the gradient [N, 3]: scaling the Jacobian itself put a
+        // single-threaded pass over its permuted layout into every backward.
+        let scale = 2.0 * self.bound;
+        let eye = Tensor::<2>::eye(3, &device).mul_scalar(scale); // [3, 3]
         let t_x = eye.unsqueeze_dim::<3>(1).expand([3, n, 3]);
         let t_enc = jac.permute([2, 0, 1]); // [3, N, L·F]
         let t = Tensor::cat(vec![t_x, t_enc], 2).reshape([3 * n, 3 + e]);
@@ -101,7 +104,7 @@ impl SdfGrid {
             h: Tensor::cat(vec![x.clone(), enc], 1),
             t,
         };
-        let out = d.linear(&self.hidden).softplus().linear(&self.out);
-        distance_features_and_gradient(x, self.radius, out)
+        let out = d.linear(&self.hidden).softplus().output(&self.out);
+        distance_features_and_gradient(x, self.radius, out, scale)
     }
 }

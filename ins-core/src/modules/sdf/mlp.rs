@@ -132,11 +132,12 @@ impl SdfMlp {
                 };
                 d = d.cat(again, std::f32::consts::FRAC_1_SQRT_2);
             }
-            d = d.linear(layer);
             if l < last {
-                d = d.softplus();
+                d = d.linear(layer).softplus();
+            } else {
+                d = d.output(layer);
             }
         }
-        distance_features_and_gradient(x, self.radius, d)
+        distance_features_and_gradient(x, self.radius, d, 1.0)
     }
 }

@@ -100,14 +100,21 @@ fn distance_and_features(x: Tensor<2>, radius: f32, out: Tensor<2>) -> (Tensor<1
 }
 
 /// [`distance_and_features`] of a forward-mode output, with the gradient: the network's plus
-/// the sphere's `x / |x|`.
+/// the sphere's `x / |x|`. `tangent_scale`: how many times the tangents fed in were `∂/∂x`'s
+/// (the network's gradient is divided by it).
 fn distance_features_and_gradient(
     x: Tensor<2>,
     radius: f32,
     out: Dual,
+    tangent_scale: f32,
 ) -> (Tensor<1>, Tensor<2>, Tensor<2>) {
     let [n, _] = x.dims();
     let (sdf, features, grad) = out.split();
+    let grad = if tangent_scale == 1.0 {
+        grad
+    } else {
+        grad.div_scalar(tangent_scale)
+    };
     let norm = norm(x.clone());
     let sdf = sdf + norm.clone().sub_scalar(radius);
     let grad = grad + x / norm.clamp_min(1e-6).reshape([n, 1]);
