@@ -1,4 +1,5 @@
-//! Reading a step's loss values in one host sync, and stopping on NaN or overflow.
+//! A step's loss values: weighed on the device, read back (one transfer for one step or for
+//! several), and checked for NaN or overflow.
 
 use burn::prelude::*;
 
@@ -6,10 +7,66 @@ use super::error::TrainError;
 use super::phase::Phase;
 use super::task::LossTerms;
 
-/// The weighted total of a step (to differentiate) and every value read back.
-pub struct StepValues {
-    /// Σ weight · term, on the device.
+/// A step's weighted total (to differentiate) and the values to read back, both still on the
+/// device.
+pub struct Weighed {
+    /// Σ weight · term.
     pub total: Tensor<1>,
+    /// Every term, the total, then every probe, detached `[T + 1 + P]`.
+    pub values: Tensor<1>,
+}
+
+/// Weighs and sums a step's terms; nothing is read back.
+pub fn weigh<O>(terms: &LossTerms, phase: &Phase<O>) -> Result<Weighed, TrainError> {
+    let mut total: Option<Tensor<1>> = None;
+    for (name, t) in &terms.terms {
+        let w = phase.weight_of(name);
+        if w != 0.0 {
+            let weighted = t.clone().mul_scalar(w);
+            total = Some(match total {
+                Some(acc) => acc + weighted,
+                None => weighted,
+            });
+        }
+    }
+    let total = total.ok_or_else(|| TrainError::NothingToMinimise {
+        phase: phase.name.clone(),
+    })?;
+    let values: Vec<Tensor<1>> = terms
+        .terms
+        .iter()
+        .map(|(_, t)| t.clone())
+        .chain(std::iter::once(total.clone()))
+        .chain(terms.probes.iter().map(|p| p.value.clone()))
+        .map(|t| t.detach())
+        .collect();
+    Ok(Weighed {
+        total,
+        values: Tensor::cat(values, 0),
+    })
+}
+
+/// Reads several steps' [`Weighed::values`] back in one transfer, each step's in its own vector.
+pub fn read_back(values: Vec<Tensor<1>>) -> Result<Vec<Vec<f32>>, TrainError> {
+    let lengths: Vec<usize> = values.iter().map(|v| v.dims()[0]).collect();
+    let all = Tensor::cat(values, 0)
+        .into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .map_err(|e| TrainError::Task(anyhow::anyhow!("reading the loss values: {e:?}")))?;
+    let mut rest = all.as_slice();
+    Ok(lengths
+        .into_iter()
+        .map(|n| {
+            let (this, next) = rest.split_at(n);
+            rest = next;
+            this.to_vec()
+        })
+        .collect())
+}
+
+/// Every value of a step, read back.
+pub struct StepValues {
     /// Each term's unweighted value, in the order of [`LossTerms::terms`].
     pub terms: Vec<(&'static str, f64)>,
     /// The weighted total's value.
@@ -20,45 +77,34 @@ pub struct StepValues {
 }
 
 impl StepValues {
-    /// Weights and sums the terms, then reads every term, the total and the probes back in
-    /// one transfer.
-    /// A term that is NaN or infinite is [`TrainError::Diverged`]; a finite set of terms
-    /// whose weighted sum is not finite is [`TrainError::WeightOverflow`].
+    /// Weighs the terms and reads them, the total and the probes back in one transfer (see
+    /// [`StepValues::check`]): the total to differentiate, and the values.
     pub fn read<O>(
         terms: &LossTerms,
         phase: &Phase<O>,
         step: usize,
         lr: f64,
         last_checkpoint: impl Fn() -> Option<std::path::PathBuf>,
+    ) -> Result<(Tensor<1>, Self), TrainError> {
+        let weighed = weigh(terms, phase)?;
+        let values = read_back(vec![weighed.values])?;
+        let names: Vec<&'static str> = terms.terms.iter().map(|(n, _)| *n).collect();
+        let values = Self::check(&values[0], &names, phase, step, lr, last_checkpoint)?;
+        Ok((weighed.total, values))
+    }
+
+    /// The values of step `step` read back (`values`: the terms named `names`, the total, the
+    /// probes). A term that is NaN or infinite is [`TrainError::Diverged`]; a finite set of
+    /// terms whose weighted sum is not finite is [`TrainError::WeightOverflow`].
+    pub fn check<O>(
+        values: &[f32],
+        names: &[&'static str],
+        phase: &Phase<O>,
+        step: usize,
+        lr: f64,
+        last_checkpoint: impl Fn() -> Option<std::path::PathBuf>,
     ) -> Result<Self, TrainError> {
-        let mut total: Option<Tensor<1>> = None;
-        for (name, t) in &terms.terms {
-            let w = phase.weight_of(name);
-            if w != 0.0 {
-                let weighted = t.clone().mul_scalar(w);
-                total = Some(match total {
-                    Some(acc) => acc + weighted,
-                    None => weighted,
-                });
-            }
-        }
-        let total = total.ok_or_else(|| TrainError::NothingToMinimise {
-            phase: phase.name.clone(),
-        })?;
-        let read: Vec<Tensor<1>> = terms
-            .terms
-            .iter()
-            .map(|(_, t)| t.clone())
-            .chain(std::iter::once(total.clone()))
-            .chain(terms.probes.iter().map(|p| p.value.clone()))
-            .map(|t| t.detach())
-            .collect();
-        let values = Tensor::cat(read, 0)
-            .into_data()
-            .convert::<f32>()
-            .try_to_vec::<f32>()
-            .map_err(|e| TrainError::Task(anyhow::anyhow!("reading the loss values: {e:?}")))?;
-        for ((name, _), &value) in terms.terms.iter().zip(&values) {
+        for (name, &value) in names.iter().zip(values) {
             if !value.is_finite() {
                 return Err(TrainError::Diverged {
                     term: name.to_string(),
@@ -71,7 +117,7 @@ impl StepValues {
                 });
             }
         }
-        let total_value = values[terms.terms.len()];
+        let total_value = values[names.len()];
         if !total_value.is_finite() {
             return Err(TrainError::WeightOverflow {
                 value: total_value,
@@ -81,15 +127,13 @@ impl StepValues {
             });
         }
         Ok(Self {
-            total,
-            terms: terms
-                .terms
+            terms: names
                 .iter()
-                .zip(&values)
-                .map(|((n, _), &v)| (*n, v as f64))
+                .zip(values)
+                .map(|(n, &v)| (*n, v as f64))
                 .collect(),
             total_value: total_value as f64,
-            probes: values[terms.terms.len() + 1..]
+            probes: values[names.len() + 1..]
                 .iter()
                 .map(|&v| v as f64)
                 .collect(),

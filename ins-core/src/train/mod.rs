@@ -7,6 +7,7 @@ pub mod folder;
 pub mod groups;
 pub mod guard;
 pub mod metrics;
+mod pending;
 pub mod phase;
 pub mod plot;
 pub mod progress;

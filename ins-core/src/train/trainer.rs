@@ -15,14 +15,16 @@ use super::checkpoint::{Checkpoint, CheckpointStore, load_module_bytes, module_b
 use super::error::TrainError;
 use super::folder::RunFolder;
 use super::groups::ParamGroups;
-use super::guard::StepValues;
+use super::guard::{StepValues, weigh};
 use super::metrics::MetricsLog;
+use super::pending::{PendingSteps, READ_EVERY_ON_DEVICE};
 use super::phase::{Objective, Phase};
 use super::plot::plot_history;
 use super::progress::{FirstStep, Progress};
 use super::task::{LossTerms, StepContext, Task};
 use super::watch::ProbeWatch;
 use crate::kernels::adam::FusedAdam;
+use crate::kernels::flex::on_flex;
 
 /// Run-level options.
 #[derive(Debug, Clone)]
@@ -35,6 +37,9 @@ pub struct TrainOptions {
     pub checkpoint_every: usize,
     /// Steps between metric lines.
     pub log_every: usize,
+    /// Steps whose loss values are read back together (`None`: every step on a CPU, where a
+    /// read costs nothing, [`READ_EVERY_ON_DEVICE`] on a GPU, where each read drains the queue).
+    pub read_every: Option<usize>,
     /// Continue from the newest checkpoint in `out_dir`.
     pub resume: bool,
     /// No progress bar.
@@ -57,6 +62,7 @@ impl TrainOptions {
             seed: 0,
             checkpoint_every: 100,
             log_every: 10,
+            read_every: None,
             resume: false,
             quiet: false,
             stop_after: None,
@@ -178,7 +184,10 @@ impl<O: Objective> Trainer<O> {
         let mut current_phase = None;
         let mut watch = std::mem::take(&mut state.watch);
         let mut warnings = Vec::new();
+        let mut pending = PendingSteps::default();
         let mut step = start;
+        let stops_at =
+            |step: usize| step == total || self.opts.stop_after.is_some_and(|n| step - start >= n);
         while step < total && self.opts.stop_after.is_none_or(|n| step - start < n) {
             let (pi, in_phase) = self.phase_at(step);
             let phase = &self.phases[pi];
@@ -203,24 +212,37 @@ impl<O: Objective> Trainer<O> {
             let lr = phase.lr.at(in_phase);
             let ts = Instant::now();
             // The task's state and the probes' watch before this step belong with the
-            // parameters before it.
+            // parameters before it: the steps before it are read and logged first.
             let due = self.opts.checkpoint_every > 0
                 && step > start
                 && step.is_multiple_of(self.opts.checkpoint_every);
             let before = if due {
+                let drained =
+                    pending.drain(&self.phases, || store.latest_path(), &mut watch, &mut last);
+                self.log_records(
+                    drained,
+                    total,
+                    &mut log,
+                    &mut state,
+                    &progress,
+                    &mut warnings,
+                )?;
                 Some((task.save_state()?, watch.clone()))
             } else {
                 None
             };
             let mut terms = task.losses(&model, &ctx)?;
             check_declared(&terms, phase, task.terms(phase.objective))?;
-            let values = StepValues::read(&terms, phase, step, lr, || store.latest_path())?;
-            for warning in watch.observe(&terms.probes, &values.probes, step) {
-                progress.warn(&warning);
-                warnings.push(warning);
-            }
+            let weighed = weigh(&terms, phase)?;
+            let read_every = self.opts.read_every.unwrap_or(if on_flex(&weighed.total) {
+                1
+            } else {
+                READ_EVERY_ON_DEVICE
+            });
+            pending.push(step, pi, lr, &mut terms, weighed.values);
             // Parameters that produced a finite loss are the ones checkpointed.
             if let Some((task_state, watch_state)) = before {
+                pending.read(&self.phases, || store.latest_path())?;
                 state.step = step;
                 state.watch = watch_state;
                 self.save(&store, &model, &optim, &state, task_state)?;
@@ -235,45 +257,27 @@ impl<O: Objective> Trainer<O> {
                 &groups,
                 phase,
                 lr,
-                &values.total,
+                &weighed.total,
                 deferred,
             );
             if let Some(first) = &self.opts.first_step {
                 first.done();
             }
             let extra = task.after_step(&model, &ctx)?;
+            let has_extra = !extra.is_empty();
+            pending.finish_last(ts.elapsed().as_secs_f64() * 1e3, extra);
             step += 1;
-
-            let mut record = serde_json::Map::new();
-            record.insert("step".into(), (step - 1).into());
-            record.insert("phase".into(), phase.name.clone().into());
-            for (name, v) in &values.terms {
-                last.insert(name.to_string(), *v);
-                record.insert(name.to_string(), (*v).into());
-            }
-            for (name, term, f) in &terms.derived {
-                if let Some((_, v)) = values.terms.iter().find(|(n, _)| n == term) {
-                    let d = f(*v);
-                    last.insert(name.to_string(), d);
-                    record.insert(name.to_string(), d.into());
-                }
-            }
-            for (name, v) in terms.metrics.iter().chain(&extra) {
-                last.insert(name.clone(), *v);
-                record.insert(name.clone(), (*v).into());
-            }
-            for (probe, &v) in terms.probes.iter().zip(&values.probes) {
-                last.insert(probe.name.to_string(), v);
-                record.insert(probe.name.to_string(), v.into());
-            }
-            record.insert("loss".into(), values.total_value.into());
-            record.insert("lr".into(), lr.into());
-            record.insert("ms".into(), (ts.elapsed().as_secs_f64() * 1e3).into());
-            if step.is_multiple_of(self.opts.log_every.max(1)) || step == total || !extra.is_empty()
-            {
-                let rec = serde_json::Value::Object(record);
-                log.write(&rec)?;
-                state.history.push(rec);
+            if pending.len() >= read_every || has_extra || stops_at(step) {
+                let drained =
+                    pending.drain(&self.phases, || store.latest_path(), &mut watch, &mut last);
+                self.log_records(
+                    drained,
+                    total,
+                    &mut log,
+                    &mut state,
+                    &progress,
+                    &mut warnings,
+                )?;
             }
             progress.update(step, status_line(&phase.name, &last));
         }
@@ -300,6 +304,34 @@ impl<O: Objective> Trainer<O> {
             warnings,
             final_scores: BTreeMap::new(),
         })
+    }
+
+    /// Writes the drained steps' metrics lines (every `log_every`-th step, the last, and those
+    /// with numbers of their own) and prints their warnings; then the error of a step that
+    /// diverged, if one did.
+    #[allow(clippy::too_many_arguments)]
+    fn log_records(
+        &self,
+        drained: super::pending::Drained,
+        total: usize,
+        log: &mut MetricsLog,
+        state: &mut TrainerState,
+        progress: &Progress,
+        warnings: &mut Vec<String>,
+    ) -> Result<(), TrainError> {
+        for l in drained.logged {
+            for w in l.warnings {
+                progress.warn(&w);
+                warnings.push(w);
+            }
+            let after = l.step + 1;
+            if after.is_multiple_of(self.opts.log_every.max(1)) || after == total || l.has_extra {
+                let rec = serde_json::Value::Object(l.record);
+                log.write(&rec)?;
+                state.history.push(rec);
+            }
+        }
+        drained.error.map_or(Ok(()), Err)
     }
 
     /// A fresh start (refusing to overwrite a run) or the state of the newest checkpoint.
@@ -458,8 +490,8 @@ impl<O: Objective> Stepper<O> {
         model: &T::Model,
     ) -> Result<(f64, Option<GradientsParams>), TrainError> {
         let ctx = standalone_context(&self.phase, self.step);
-        let (mut terms, values) = evaluate(task, model, &ctx)?;
-        let grads = step_gradients(model, &values.total, terms.gradients.take());
+        let (mut terms, total, values) = evaluate(task, model, &ctx)?;
+        let grads = step_gradients(model, &total, terms.gradients.take());
         Ok((values.total_value, grads))
     }
 
@@ -471,14 +503,14 @@ impl<O: Objective> Stepper<O> {
         model: T::Model,
     ) -> Result<(T::Model, f64, Vec<(String, f64)>), TrainError> {
         let ctx = standalone_context(&self.phase, self.step);
-        let (mut terms, values) = evaluate(task, &model, &ctx)?;
+        let (mut terms, total, values) = evaluate(task, &model, &ctx)?;
         let model = update(
             model,
             &mut self.optim,
             &self.groups,
             &self.phase,
             self.phase.lr.at(self.step),
-            &values.total,
+            &total,
             terms.gradients.take(),
         );
         let mut metrics = terms.metrics.clone();
@@ -505,16 +537,17 @@ fn standalone_context<O>(phase: &Phase<O>, step: usize) -> StepContext<'_, O> {
     }
 }
 
-/// The task's terms at `ctx` and their values, read back (a NaN stops here).
+/// The task's terms at `ctx`, their weighted total and their values, read back (a NaN stops
+/// here).
 fn evaluate<T: Task>(
     task: &mut T,
     model: &T::Model,
     ctx: &StepContext<T::Objective>,
-) -> Result<(LossTerms, StepValues), TrainError> {
+) -> Result<(LossTerms, Tensor<1>, StepValues), TrainError> {
     let terms = task.losses(model, ctx)?;
     let lr = ctx.phase.lr.at(ctx.step_in_phase);
-    let values = StepValues::read(&terms, ctx.phase, ctx.step_in_phase, lr, || None)?;
-    Ok((terms, values))
+    let (total, values) = StepValues::read(&terms, ctx.phase, ctx.step_in_phase, lr, || None)?;
+    Ok((terms, total, values))
 }
 
 /// A task must return only the terms it declares for the objective.

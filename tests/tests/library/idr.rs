@@ -4,7 +4,6 @@
 
 use burn::prelude::*;
 use ins_core::imaging::RgbImage;
-use ins_core::render::sphere_tracing::TraceOptions;
 use ins_models::consistency::PaintingFeatures;
 use ins_models::idr::eval::evaluate_views;
 use ins_models::idr::mesh::extract_mesh;
@@ -105,7 +104,7 @@ fn train_and_evaluate(
         run.scene(),
         &views,
         None,
-        &TraceOptions::default(),
+        &run.config.view_options(),
         device,
     )
     .unwrap();
@@ -382,7 +381,7 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
     let run_dir = dir.path().join("surface");
     let (run, evals) = pretrain_and_score(&cfg, &run_dir, &device);
     let views: Vec<usize> = evals.iter().map(|e| e.view).collect();
-    let trace = TraceOptions::default();
+    let opts = run.config.view_options();
 
     // Stylize with two paintings: the surface is frozen by default, so the silhouette is the
     // same; colours move.
@@ -406,7 +405,7 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
         &srun.scene(),
         &views,
         code,
-        &trace,
+        &opts,
         &device,
     )
     .unwrap();
@@ -453,7 +452,7 @@ fn grid_surface_pretrains_stylizes_and_meshes() {
             srun.scene(),
             &srun.scene().views[view.view].camera,
             code,
-            &trace,
+            &opts,
             &device,
         )
         .unwrap();

@@ -311,3 +311,57 @@ fn a_watched_probe_warns_at_the_same_step_when_the_run_is_resumed() {
     assert_eq!(resumed.warnings.len(), 1, "{:?}", resumed.warnings);
     assert!(resumed.warnings[0].contains(&at), "{}", resumed.warnings[0]);
 }
+
+/// Reading the loss values of several steps at once (as on a GPU) changes nothing the user sees:
+/// the same metrics lines, the same checkpoints, and a NaN reported at the step that produced
+/// it, with the last checkpoint taken before it.
+#[test]
+fn steps_read_back_together_log_and_stop_as_steps_read_one_by_one() {
+    let device = Device::flex().autodiff();
+    let lines = |dir: &std::path::Path| -> Vec<serde_json::Value> {
+        std::fs::read_to_string(dir.join("metrics.jsonl"))
+            .unwrap()
+            .lines()
+            .map(|l| {
+                let mut v: serde_json::Value = serde_json::from_str(l).unwrap();
+                v.as_object_mut().unwrap().remove("ms");
+                v
+            })
+            .collect()
+    };
+    let run = |read_every: usize, nan_from: usize| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut o = quiet(dir.path());
+        o.read_every = Some(read_every);
+        let out = Trainer::new(vec![fit(11, 1e-2)], o)
+            .run(&mut ToyTask { nan_from, ..task() }, toy(&device));
+        (dir, out)
+    };
+    let (one_dir, one) = run(1, usize::MAX);
+    let (four_dir, four) = run(4, usize::MAX);
+    let (one, four) = (one.unwrap(), four.unwrap());
+    assert_eq!(lines(one_dir.path()).len(), 11);
+    assert_eq!(lines(one_dir.path()), lines(four_dir.path()));
+    assert_eq!(one.last, four.last);
+    assert_eq!(
+        values(one.model.b.weight.val()),
+        values(four.model.b.weight.val())
+    );
+
+    // A NaN from step 5 on, read with steps 4..8 (the checkpoint at step 6 reads it first).
+    let (dir, err) = run(4, 5);
+    let err = err.err().expect("NaN must stop the run");
+    let TrainError::Diverged {
+        step, checkpoint, ..
+    } = &err
+    else {
+        panic!("expected Diverged, got {err}");
+    };
+    assert_eq!(*step, 5);
+    assert!(
+        checkpoint.as_ref().unwrap().ends_with("step-00000004-000"),
+        "{err}"
+    );
+    // Steps 0..5 were logged, as read one by one.
+    assert_eq!(lines(dir.path()).len(), 5);
+}
