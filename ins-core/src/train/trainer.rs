@@ -97,6 +97,15 @@ pub struct Trainer<O> {
     opts: TrainOptions,
 }
 
+/// What a run has logged so far: the metrics file, the probes' watch, the warnings printed, the
+/// last value of every number.
+struct Logbook {
+    log: MetricsLog,
+    watch: ProbeWatch,
+    warnings: Vec<String>,
+    last: BTreeMap<String, f64>,
+}
+
 /// What a checkpoint records of the trainer itself.
 #[derive(Serialize, Deserialize, Default)]
 struct TrainerState {
@@ -171,7 +180,7 @@ impl<O: Objective> Trainer<O> {
         std::fs::create_dir_all(out).map_err(|e| TrainError::io(out, e))?;
         let store = self.store();
         let (mut model, mut optim, mut state) = self.start(&store, task, model)?;
-        let mut log = MetricsLog::rewrite(&RunFolder::new(out).metrics(), &state.history)?;
+        let log = MetricsLog::rewrite(&RunFolder::new(out).metrics(), &state.history)?;
 
         let total = self.total_steps();
         let start = state.step;
@@ -180,10 +189,13 @@ impl<O: Objective> Trainer<O> {
             progress.attach(first);
         }
         let t0 = Instant::now();
-        let mut last = BTreeMap::new();
         let mut current_phase = None;
-        let mut watch = std::mem::take(&mut state.watch);
-        let mut warnings = Vec::new();
+        let mut book = Logbook {
+            log,
+            watch: std::mem::take(&mut state.watch),
+            warnings: Vec::new(),
+            last: BTreeMap::new(),
+        };
         let mut pending = PendingSteps::default();
         let mut step = start;
         let stops_at =
@@ -217,17 +229,8 @@ impl<O: Objective> Trainer<O> {
                 && step > start
                 && step.is_multiple_of(self.opts.checkpoint_every);
             let before = if due {
-                let drained =
-                    pending.drain(&self.phases, || store.latest_path(), &mut watch, &mut last);
-                self.log_records(
-                    drained,
-                    total,
-                    &mut log,
-                    &mut state,
-                    &progress,
-                    &mut warnings,
-                )?;
-                Some((task.save_state()?, watch.clone()))
+                self.flush(&mut pending, &store, &mut book, &mut state, &progress)?;
+                Some((task.save_state()?, book.watch.clone()))
             } else {
                 None
             };
@@ -268,25 +271,16 @@ impl<O: Objective> Trainer<O> {
             pending.finish_last(ts.elapsed().as_secs_f64() * 1e3, extra);
             step += 1;
             if pending.len() >= read_every || has_extra || stops_at(step) {
-                let drained =
-                    pending.drain(&self.phases, || store.latest_path(), &mut watch, &mut last);
-                self.log_records(
-                    drained,
-                    total,
-                    &mut log,
-                    &mut state,
-                    &progress,
-                    &mut warnings,
-                )?;
+                self.flush(&mut pending, &store, &mut book, &mut state, &progress)?;
             }
-            progress.update(step, status_line(&phase.name, &last));
+            progress.update(step, status_line(&phase.name, &book.last));
         }
         progress.finish();
         if let Some(first) = &self.opts.first_step {
             first.done();
         }
         state.step = step;
-        state.watch = watch;
+        state.watch = book.watch;
         if !params_finite(&model) {
             return Err(TrainError::NonFiniteParameters {
                 step,
@@ -299,35 +293,40 @@ impl<O: Objective> Trainer<O> {
             model,
             steps: step,
             finished: step >= total,
-            last,
+            last: book.last,
             seconds: t0.elapsed().as_secs_f64(),
-            warnings,
+            warnings: book.warnings,
             final_scores: BTreeMap::new(),
         })
     }
 
-    /// Writes the drained steps' metrics lines (every `log_every`-th step, the last, and those
-    /// with numbers of their own) and prints their warnings; then the error of a step that
-    /// diverged, if one did.
-    #[allow(clippy::too_many_arguments)]
-    fn log_records(
+    /// Reads and empties `pending`: each step's probes watched, its values noted, its metrics
+    /// line written (every `log_every`-th step, the last, and those with numbers of their own),
+    /// its warnings printed; then the error of a step that diverged, if one did.
+    fn flush(
         &self,
-        drained: super::pending::Drained,
-        total: usize,
-        log: &mut MetricsLog,
+        pending: &mut PendingSteps,
+        store: &CheckpointStore,
+        book: &mut Logbook,
         state: &mut TrainerState,
         progress: &Progress,
-        warnings: &mut Vec<String>,
     ) -> Result<(), TrainError> {
+        let drained = pending.drain(
+            &self.phases,
+            || store.latest_path(),
+            &mut book.watch,
+            &mut book.last,
+        );
+        let total = self.total_steps();
         for l in drained.logged {
             for w in l.warnings {
                 progress.warn(&w);
-                warnings.push(w);
+                book.warnings.push(w);
             }
             let after = l.step + 1;
             if after.is_multiple_of(self.opts.log_every.max(1)) || after == total || l.has_extra {
                 let rec = serde_json::Value::Object(l.record);
-                log.write(&rec)?;
+                book.log.write(&rec)?;
                 state.history.push(rec);
             }
         }
