@@ -32,6 +32,7 @@ pub fn run(device: &Device, steps: usize, bf16: bool) -> Result<Timing> {
     })?;
     Ok(Timing {
         times,
+        pipelined: None,
         rays: Some(ROWS as f64),
     })
 }

@@ -62,6 +62,7 @@ pub fn run(device: &Device, steps: usize, kernel: bool, points: Points) -> Resul
     })?;
     Ok(Timing {
         times,
+        pipelined: None,
         rays: Some(POINTS as f64),
     })
 }

@@ -149,6 +149,23 @@ fn idr_trains_on_wgpu_as_on_flex() {
     );
 }
 
+/// On a GPU backend the benchmark also times steps taken back to back with one sync at the end,
+/// the loss left on the device (as PyTorch's reference times a GPU); flex reports no such
+/// figure (`bench_idr_pretrain_reports_a_step_time_and_its_rays`).
+#[test]
+fn bench_on_wgpu_also_times_steps_back_to_back() {
+    let o = cli_within(
+        &["bench", "--backend", "wgpu", "idr-pretrain", "--steps", "1"],
+        &[],
+        WGPU_LIMIT,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let line: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(line["backend"], "wgpu", "{line}");
+    let pipelined = line["pipelined_ms_per_step"].as_f64().unwrap_or(0.0);
+    assert!(pipelined > 0.0, "{line}");
+}
+
 /// Runs `args` with `--backend flex`, then `--backend wgpu` (each into its own run folder in
 /// `dir`, under [`WGPU_LIMIT`]), and returns the losses each logged.
 fn losses_on_flex_and_wgpu(dir: &Path, args: &[&str]) -> [Vec<(u64, f64)>; 2] {

@@ -158,8 +158,9 @@ pub(crate) fn filled(n: usize, fill: impl Fn(usize, &mut [MaybeUninit<f32>]) + S
     out
 }
 
-/// Whether `x` lives on Flex (with or without autodiff): where the hand-written ops run.
-pub(crate) fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
+/// Whether `x` lives on Flex (with or without autodiff): where the hand-written ops run, and
+/// where reading a value back costs nothing.
+pub fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
     matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_))
 }
 

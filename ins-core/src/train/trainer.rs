@@ -524,6 +524,32 @@ impl<O: Objective> Stepper<O> {
         self.step += 1;
         Ok((model, values.total_value, metrics))
     }
+
+    /// Takes one step of `task` on `model` without reading its loss back (it stays on the
+    /// device, as the trainer leaves it between reads off a CPU); returns the updated model and
+    /// the metrics the task computed on the host.
+    pub fn step_unread<T: Task<Objective = O>>(
+        &mut self,
+        task: &mut T,
+        model: T::Model,
+    ) -> Result<(T::Model, Vec<(String, f64)>), TrainError> {
+        let ctx = standalone_context(&self.phase, self.step);
+        let mut terms = task.losses(&model, &ctx)?;
+        let weighed = weigh(&terms, &self.phase)?;
+        let model = update(
+            model,
+            &mut self.optim,
+            &self.groups,
+            &self.phase,
+            self.phase.lr.at(self.step),
+            &weighed.total,
+            terms.gradients.take(),
+        );
+        let mut metrics = std::mem::take(&mut terms.metrics);
+        metrics.extend(task.after_step(&model, &ctx)?);
+        self.step += 1;
+        Ok((model, metrics))
+    }
 }
 
 /// Step `step` of `phase` outside a run: the run's step is the phase's, seeded as seed 0.

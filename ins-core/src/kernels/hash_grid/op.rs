@@ -91,15 +91,8 @@ fn flex_from(values: Vec<f32>, shape: impl Into<burn::backend::Shape>) -> FlexTe
 /// A table's gradient, zeroed by all threads: it is tens of MB (the colour grid's 16.8 M
 /// floats), and one thread's memset left the other cores idle for a few ms every step.
 fn zeroed_table(layout: &kernel::Layout) -> Vec<f32> {
-    use rayon::prelude::*;
     let n = layout.total_rows() * layout.features;
-    let mut g: Vec<f32> = Vec::with_capacity(n);
-    g.spare_capacity_mut()
-        .par_chunks_mut(1 << 16)
-        .for_each(|c| c.fill(std::mem::MaybeUninit::new(0.0)));
-    // SAFETY: all `n` elements of the capacity were written above.
-    unsafe { g.set_len(n) };
-    g
+    crate::kernels::flex::filled(n, |_, chunk| chunk.fill(std::mem::MaybeUninit::new(0.0)))
 }
 
 fn rows(t: &impl TensorMetadata) -> usize {
