@@ -45,3 +45,6 @@ if [ -f .dev/library.xz ]; then
     vgg_import::f16_features_on_the_real_network_stay_close_to_f32)
 fi
 stamp "all done"
+# Issue 48's table: GPU (synced and pipelined) against PyTorch on the same GPU and 2 CPU cores.
+python3 scripts/gpu/table.py "$OUT/log.txt" $([ -f .dev/cpu_bench.jsonl ] && echo .dev/cpu_bench.jsonl) > "$OUT/table.md"
+cat "$OUT/table.md"

@@ -46,6 +46,10 @@ else
   rm -f .dev/vgg.bpk.xz .dev/vgg.meta .dev/converted-*.json
 fi
 cp "$SHARED/data/styles/starry_night.jpg" "$SHARED/bench/torch_ref.py" .dev/
+# The CPU column of check.sh's table: `ins-cli bench` lines from this machine, if written to
+# target/cpu_bench.jsonl before packing (e.g. `ins-cli bench siren vgg nerf-pretrain
+# nerf-stylize nerf-grid nerf-grid-stylize idr-pretrain > target/cpu_bench.jsonl`).
+if [ -f target/cpu_bench.jsonl ]; then cp target/cpu_bench.jsonl .dev/; else rm -f .dev/cpu_bench.jsonl; fi
 "$PYTHON" - "$SHARED/data/nerf_synthetic/lego" .dev/lego200 <<'PY'
 import json, os, sys
 from PIL import Image
