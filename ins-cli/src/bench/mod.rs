@@ -151,23 +151,27 @@ pub fn timed(steps: usize, mut step: impl FnMut() -> Result<()>) -> Result<Vec<f
     Ok(times)
 }
 
-/// Reads one value of the model's first parameter, so an asynchronous backend has finished the
-/// update before the clock stops.
-fn sync<M: Module>(model: &M) {
-    struct First(bool);
+/// The model's first float parameter, flattened.
+fn first_param<M: Module>(model: &M) -> Option<Tensor<1>> {
+    struct First(Option<Tensor<1>>);
     impl ModuleVisitor for First {
         fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if !self.0 {
-                self.0 = true;
-                let _ = param
-                    .val()
-                    .flatten::<1>(0, D - 1)
-                    .slice([0..1])
-                    .into_scalar::<f32>();
+            if self.0.is_none() {
+                self.0 = Some(param.val().flatten::<1>(0, D - 1));
             }
         }
     }
-    model.visit(&mut First(false));
+    let mut v = First(None);
+    model.visit(&mut v);
+    v.0
+}
+
+/// Reads one value of the model's first parameter, so an asynchronous backend has finished the
+/// update before the clock stops.
+fn sync<M: Module>(model: &M) {
+    if let Some(p) = first_param(model) {
+        let _ = p.slice([0..1]).into_scalar::<f32>();
+    }
 }
 
 /// Times `steps` training steps of `phase` on `task` from `model`, as the trainer takes them.
@@ -214,15 +218,5 @@ pub fn time_task<T: Task>(
 
 /// Whether the model's first parameter lives on flex, where reading back costs nothing.
 fn first_param_on_flex<M: Module>(model: &M) -> bool {
-    struct First(Option<bool>);
-    impl ModuleVisitor for First {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if self.0.is_none() {
-                self.0 = Some(ins_core::kernels::flex::on_flex(&param.val()));
-            }
-        }
-    }
-    let mut v = First(None);
-    model.visit(&mut v);
-    v.0.unwrap_or(true)
+    first_param(model).is_none_or(|p| ins_core::kernels::flex::on_flex(&p))
 }
