@@ -4,9 +4,10 @@
 //! the parameter's size. For small networks that is noise; for a hash table of 16.8 M entries
 //! (IDR's appearance grid) it took 35 ms a step, two fifths of the step. This optimizer does
 //! the same arithmetic element by element, reading the gradient and writing the parameter and
-//! both moments once, in place where Flex owns them alone. Its state is Burn's [`AdamState`],
-//! so checkpoints written with either optimizer load into the other. Other backends (wgpu) run
-//! the same update as tensor ops.
+//! both moments once, in place where Flex owns them alone. Its state is Burn's [`AdamState`]
+//! ([`FusedAdamState`] writes and reads it under the same names), so checkpoints written with
+//! either optimizer load into the other. Other backends (wgpu, CUDA) run the same update as
+//! tensor ops.
 
 #![allow(deprecated)]
 
@@ -15,7 +16,10 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{
     Backend, DType, Dispatch, Flex, TensorData, TensorMetadata, backend_extension,
 };
-use burn::optim::{AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer};
+use burn::optim::{
+    AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer, Optimizer, RecordState,
+    StateSink, StateSource,
+};
 use burn::prelude::*;
 use rayon::prelude::*;
 
@@ -171,8 +175,29 @@ impl FusedAdamOps for Flex {
     }
 }
 
+/// Burn's [`AdamState`], read back from a checkpoint onto the CPU.
+///
+/// Why: Burn loads an optimizer's state onto `Device::default()`, the first backend of the
+/// build in its order (CUDA, then wgpu, then flex), and moves each parameter's state to that
+/// parameter's device at its next step. On a machine without CUDA (or, before CUDA was in the
+/// build, without Vulkan) creating the state there failed and a resume stopped as "damaged
+/// optimizer state"; elsewhere it opened a GPU a CPU run never uses. Read onto flex, the state
+/// moves to the parameter's device at the first step, as before.
+#[derive(Clone)]
+pub struct FusedAdamState<const D: usize>(pub AdamState<D>);
+
+impl<const D: usize> RecordState for FusedAdamState<D> {
+    fn state_flatten(&self, prefix: &str, out: &mut StateSink) {
+        self.0.state_flatten(prefix, out);
+    }
+
+    fn state_unflatten(prefix: &str, src: &mut StateSource, _device: &Device) -> Option<Self> {
+        AdamState::state_unflatten(prefix, src, &Device::flex()).map(Self)
+    }
+}
+
 impl Optimizer for FusedAdam {
-    type State<const D: usize> = AdamState<D>;
+    type State<const D: usize> = FusedAdamState<D>;
 
     fn step<const D: usize>(
         &self,
@@ -182,7 +207,7 @@ impl Optimizer for FusedAdam {
         state: Option<Self::State<D>>,
     ) -> (Tensor<D>, Option<Self::State<D>>) {
         let (time, m, v) = match state {
-            Some(s) => (
+            Some(FusedAdamState(s)) => (
                 s.momentum.time + 1,
                 s.momentum.moment_1,
                 s.momentum.moment_2,
@@ -211,11 +236,11 @@ impl Optimizer for FusedAdam {
             (tensor - delta, m, v)
         };
         let momentum = AdaptiveMomentumState::new(time, m, v);
-        (tensor, Some(AdamState::new(momentum)))
+        (tensor, Some(FusedAdamState(AdamState::new(momentum))))
     }
 
     fn to_device<const D: usize>(mut state: Self::State<D>, device: &Device) -> Self::State<D> {
-        state.momentum = state.momentum.to_device(device);
+        state.0.momentum = state.0.momentum.to_device(device);
         state
     }
 }
