@@ -16,14 +16,15 @@ use vgg_import::{Preprocess, Vgg, VggSource, load_vgg};
 /// Where a command computes.
 #[derive(Args, Debug, Clone)]
 pub struct DeviceArgs {
-    /// Backend: auto (wgpu where a hardware GPU is present, else flex), flex or wgpu.
+    /// Backend: auto (wgpu where a hardware GPU is present, else flex), flex, wgpu, or cuda
+    /// (an NVIDIA GPU through CUDA; needs the driver, NVRTC and CUDA's headers: CUDA_PATH).
     #[arg(long, default_value = "auto")]
     pub backend: BackendChoice,
 }
 
 impl DeviceArgs {
-    /// The device of the chosen backend (for wgpu, an error saying what to do when the machine
-    /// has no adapter).
+    /// The device of the chosen backend (for wgpu and CUDA, an error saying what to do when the
+    /// machine has no adapter, driver or CUDA compiler).
     pub fn device(&self) -> Result<Device> {
         Ok(self.backend.try_device()?)
     }

@@ -208,10 +208,10 @@ fn main() {
             // The failure surfaces on every thread that reads the failed work: say it once.
             static TOLD: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
             if !TOLD.swap(true, std::sync::atomic::Ordering::SeqCst) {
-                let adapter = ins_core::gpu::prepared().map(|r| r.adapter.name.as_str());
+                let gpu = ins_core::gpu::prepared().map(|r| r.describe());
                 eprintln!(
                     "error: {}",
-                    ins_core::gpu_failure::memory_advice(adapter, failure)
+                    ins_core::gpu_failure::memory_advice(gpu.as_deref(), failure)
                 );
             }
             if !backtrace {

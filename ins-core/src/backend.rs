@@ -19,6 +19,9 @@ pub enum BackendChoice {
     Flex,
     /// wgpu (Vulkan/Metal/DX12; on CPU-only machines Mesa's lavapipe).
     Wgpu,
+    /// CUDA on an NVIDIA GPU (kernels compiled by NVRTC; the driver, NVRTC and CUDA's headers
+    /// found at run time).
+    Cuda,
 }
 
 impl std::str::FromStr for BackendChoice {
@@ -28,6 +31,7 @@ impl std::str::FromStr for BackendChoice {
             "auto" => Ok(Self::Auto),
             "flex" | "cpu" => Ok(Self::Flex),
             "wgpu" | "gpu" => Ok(Self::Wgpu),
+            "cuda" => Ok(Self::Cuda),
             // The design's first name for the CPU backend. Burn 0.22 deprecates ndarray for
             // flex, and this build leaves it out (the largest crate of the build, ten minutes
             // of compiling, for a backend slower than flex): run flex and say so.
@@ -37,7 +41,7 @@ impl std::str::FromStr for BackendChoice {
                 Ok(Self::Flex)
             }
             _ => Err(format!(
-                "unknown backend {s:?} (expected auto, flex or wgpu)"
+                "unknown backend {s:?} (expected auto, flex, wgpu or cuda)"
             )),
         }
     }
@@ -49,6 +53,7 @@ impl std::fmt::Display for BackendChoice {
             Self::Auto => "auto",
             Self::Flex => "flex",
             Self::Wgpu => "wgpu",
+            Self::Cuda => "cuda",
         })
     }
 }
@@ -68,14 +73,17 @@ impl BackendChoice {
         }
     }
 
-    /// The device (without autodiff) for this choice; for wgpu, after setting up its runtime
-    /// ([`crate::gpu::prepare`], caching under `$INS_CACHE_DIR/cubecl`), so that a machine
-    /// without an adapter gets a message saying what to do.
+    /// The device (without autodiff) for this choice; for wgpu and CUDA, after setting up
+    /// their runtime ([`crate::gpu::prepare`], [`crate::cuda::prepare`], caching under
+    /// `$INS_CACHE_DIR/cubecl`), so that a machine without an adapter, a driver or CUDA's
+    /// compiler gets a message saying what to do.
     #[allow(deprecated)]
     pub fn try_device(self) -> Result<Device, crate::gpu::GpuError> {
+        let cache = || vgg_import::source::cache_dir(None).join("cubecl");
         Ok(match self.resolve() {
             Self::Flex | Self::Auto => Device::flex(),
-            Self::Wgpu => crate::gpu::device(&vgg_import::source::cache_dir(None).join("cubecl"))?,
+            Self::Wgpu => crate::gpu::device(&cache())?,
+            Self::Cuda => crate::cuda::device(&cache())?,
         })
     }
 
@@ -108,7 +116,7 @@ mod tests {
 
     #[test]
     fn names_parse_and_print_back() {
-        for name in ["auto", "flex", "wgpu"] {
+        for name in ["auto", "flex", "wgpu", "cuda"] {
             let choice: BackendChoice = name.parse().unwrap();
             assert_eq!(choice.to_string(), name);
         }
@@ -120,9 +128,9 @@ mod tests {
     fn the_dropped_ndarray_backend_runs_flex() {
         assert_eq!("ndarray".parse::<BackendChoice>(), Ok(BackendChoice::Flex));
         assert!(super::NDARRAY_NOTE.contains("flex"));
-        let e = "cuda".parse::<BackendChoice>().unwrap_err();
+        let e = "tpu".parse::<BackendChoice>().unwrap_err();
         assert!(
-            e.contains("\"cuda\"") && e.contains("auto, flex or wgpu"),
+            e.contains("\"tpu\"") && e.contains("auto, flex, wgpu or cuda"),
             "{e}"
         );
     }

@@ -1,6 +1,8 @@
 //! The wgpu backend's runtime, set up once before its first tensor: which adapter it will use
 //! (a clear error when there is none, instead of a panic deep in CubeCL), where CubeCL keeps
-//! its compiled kernels and tuning results, and how much it tunes.
+//! its compiled kernels and tuning results, and how much it tunes. The CUDA backend
+//! (`cuda.rs`) takes the same settings ([`configure`]) and reports itself the same way
+//! ([`GpuRuntime`]).
 //!
 //! Why the program chooses CubeCL's settings: by default CubeCL keeps its cache in the
 //! `target/` of the outermost `Cargo.toml` above the working directory (or a user cache folder
@@ -39,9 +41,11 @@ pub struct Adapter {
     pub kind: AdapterKind,
 }
 
-/// The settings a wgpu run computes with.
+/// The settings a GPU run (wgpu or CUDA) computes with.
 #[derive(Debug, Clone)]
 pub struct GpuRuntime {
+    /// The backend's name on the command line (`wgpu`, `cuda`).
+    pub backend: &'static str,
     /// The adapter.
     pub adapter: Adapter,
     /// Where CubeCL keeps compiled kernels and autotune results (`None`: a user config decides).
@@ -70,9 +74,18 @@ impl GpuRuntime {
             AdapterKind::Hardware => "",
         };
         format!(
-            "wgpu on {} ({}): the first steps compile and tune GPU kernels{slow}; tuning {}; \
-             results {cache}, so later runs start faster",
-            self.adapter.name, self.adapter.api, self.tuning
+            "{}: the first steps compile and tune GPU kernels{slow}; tuning {}; results \
+             {cache}, so later runs start faster",
+            self.describe(),
+            self.tuning
+        )
+    }
+
+    /// The backend and its adapter in words ("wgpu on NVIDIA H100 (Vulkan)").
+    pub fn describe(&self) -> String {
+        format!(
+            "{} on {} ({})",
+            self.backend, self.adapter.name, self.adapter.api
         )
     }
 }
@@ -89,6 +102,12 @@ pub enum GpuError {
     NoAdapter {
         /// The APIs asked.
         apis: String,
+    },
+    /// CUDA cannot run here (no driver, no GPU, no NVRTC or headers) or did not start.
+    #[error("--backend cuda: {message}")]
+    Cuda {
+        /// What is missing or failed, and what to do.
+        message: String,
     },
     /// The adapter is there but refused to start.
     #[error(
@@ -199,6 +218,33 @@ fn program_config(kind: AdapterKind, cache: &Path) -> (CubeClRuntimeConfig, &'st
     (cfg, tuning)
 }
 
+/// Gives CubeCL the program's settings for an adapter of `kind` (caching under `cache`) unless
+/// a user's config file applies: the cache the settings name (`None` when they are not the
+/// program's), the user's file, and the tuning in words.
+pub(crate) fn configure(
+    kind: AdapterKind,
+    cache: &Path,
+) -> (Option<PathBuf>, Option<PathBuf>, &'static str) {
+    let user_config = std::env::current_dir()
+        .ok()
+        .and_then(|d| user_config_file(&d));
+    if user_config.is_some() {
+        return (None, user_config, "as the user's CubeCL config says");
+    }
+    let (cfg, tuning) = program_config(kind, cache);
+    // `try_set` declines when CubeCL has read its config already (a device opened before
+    // this call): its own settings then stay, which is also what the note says.
+    if CubeClRuntimeConfig::try_set(cfg) {
+        (Some(cache.to_path_buf()), None, tuning)
+    } else {
+        (
+            None,
+            None,
+            "CubeCL's (its config was read before this run set one)",
+        )
+    }
+}
+
 /// CubeCL's words when a device's server is registered already.
 const ALREADY_REGISTERED: &str = "Service already initialized";
 
@@ -214,31 +260,17 @@ pub fn prepare(cache: &Path) -> Result<&'static GpuRuntime, GpuError> {
         .map_err(Clone::clone)
 }
 
-/// The runtime set up by [`prepare`], if it was.
+/// The GPU runtime set up by [`prepare`] or [`crate::cuda::prepare`], if one was.
 pub fn prepared() -> Option<&'static GpuRuntime> {
-    RUNTIME.get().and_then(|r| r.as_ref().ok())
+    RUNTIME
+        .get()
+        .and_then(|r| r.as_ref().ok())
+        .or_else(crate::cuda::prepared)
 }
 
 fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
     let adapter = find_adapter()?;
-    let user_config = std::env::current_dir()
-        .ok()
-        .and_then(|d| user_config_file(&d));
-    let (cache, tuning) = if user_config.is_some() {
-        (None, "as the user's CubeCL config says")
-    } else {
-        let (cfg, tuning) = program_config(adapter.kind, cache);
-        // `try_set` declines when CubeCL has read its config already (a device opened before
-        // this call): its own settings then stay, which is also what the note says.
-        if CubeClRuntimeConfig::try_set(cfg) {
-            (Some(cache.to_path_buf()), tuning)
-        } else {
-            (
-                None,
-                "CubeCL's (its config was read before this run set one)",
-            )
-        }
-    };
+    let (cache, user_config, tuning) = configure(adapter.kind, cache);
     match cubecl::wgpu::try_init_setup::<cubecl::wgpu::AutoGraphicsApi>(
         &cubecl::wgpu::WgpuDevice::default(),
         Default::default(),
@@ -256,6 +288,7 @@ fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
         }
     }
     Ok(GpuRuntime {
+        backend: "wgpu",
         adapter,
         cache,
         user_config,

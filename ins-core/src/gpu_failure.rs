@@ -27,11 +27,12 @@ pub fn memory_failure(message: &str) -> Option<&str> {
     })
 }
 
-/// What to tell a user whose step did not fit the GPU `adapter`: the failure and the ways out.
-pub fn memory_advice(adapter: Option<&str>, failure: &str) -> String {
-    let on = adapter.map_or_else(String::new, |a| format!(" ({a})"));
+/// What to tell a user whose step did not fit the GPU (`gpu`: the backend and its adapter, as
+/// [`crate::gpu::GpuRuntime::describe`] says them): the failure and the ways out.
+pub fn memory_advice(gpu: Option<&str>, failure: &str) -> String {
+    let on = gpu.map_or_else(String::new, |a| format!(" ({a})"));
     format!(
-        "the step is too large for the GPU on the wgpu backend{on}: {failure}. Try a smaller scene \
+        "the step is too large for the GPU{on}: {failure}. Try a smaller scene \
          (--downscale 2 or more), fewer samples per step (--target-samples), a smaller patch \
          (--patch) in a new run, or --backend flex to run on the CPU"
     )
@@ -98,7 +99,7 @@ No backtrace available)";
     #[test]
     fn the_advice_names_the_backend_the_adapter_and_the_ways_out() {
         let a = memory_advice(
-            Some("NVIDIA H100"),
+            Some("wgpu on NVIDIA H100 (Vulkan)"),
             "can't allocate buffer of size: 6000000000",
         );
         for part in [

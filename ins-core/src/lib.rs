@@ -18,6 +18,7 @@
 
 pub mod backend;
 pub mod contain;
+pub mod cuda;
 pub mod eval;
 pub mod gpu;
 pub mod gpu_failure;

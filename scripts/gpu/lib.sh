@@ -22,3 +22,23 @@ unpack() { # unpack NAME: .dev/NAME.xz to /tmp/NAME, executable
 }
 for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
 nvidia-smi -L
+cuda_env() { # CUDA_PATH and the library path for --backend cuda: NVRTC compiles the kernels
+  # against CUDA's headers. A toolkit in /usr/local/cuda serves as is; otherwise the NVIDIA
+  # wheels PyTorch installed (nvidia/*/include, nvidia/*/lib) are merged into /tmp/cuda.
+  if [ -f "${CUDA_PATH:-/usr/local/cuda}/include/cuda_runtime.h" ]; then
+    export CUDA_PATH=${CUDA_PATH:-/usr/local/cuda}
+    export LD_LIBRARY_PATH=$CUDA_PATH/lib64:${LD_LIBRARY_PATH:-}
+  else
+    local roots; roots=$(python3 -c "import nvidia, sys; print(' '.join(nvidia.__path__))" 2>/dev/null)
+    mkdir -p /tmp/cuda/include /tmp/cuda/lib64
+    for r in $roots; do
+      for inc in $(find "$r" -maxdepth 3 -type d -name include); do cp -rsf "$inc"/. /tmp/cuda/include/ 2>/dev/null; done
+      for lib in $(find "$r" -maxdepth 3 -type d -name lib); do LD_LIBRARY_PATH=$lib:${LD_LIBRARY_PATH:-}; done
+    done
+    export CUDA_PATH=/tmp/cuda LD_LIBRARY_PATH
+    # cudarc asks for libnvrtc.so by its major version's names; the wheels ship libnvrtc.so.N.
+    local nvrtc; nvrtc=$(find $roots -name 'libnvrtc.so*' ! -name '*builtins*' 2>/dev/null | head -1)
+    [ -n "$nvrtc" ] && ln -sf "$nvrtc" /tmp/cuda/lib64/libnvrtc.so && LD_LIBRARY_PATH=/tmp/cuda/lib64:$LD_LIBRARY_PATH
+  fi
+  stamp "CUDA_PATH=$CUDA_PATH cuda_runtime.h: $(ls "$CUDA_PATH"/include/cuda_runtime.h 2>&1 | head -1); nvrtc: $(ldconfig -p | grep -c nvrtc) in ldconfig, $(find ${LD_LIBRARY_PATH//:/ } -maxdepth 1 -name 'libnvrtc*' 2>/dev/null | head -3 | tr '\n' ' ')"
+}

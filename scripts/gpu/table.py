@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Issue 48's table from one GPU check: each benchmark workload on the GPU (wgpu), synced per step
-and pipelined (steps back to back, one sync at the end, as PyTorch's reference times itself),
+"""Issue 48's table from one GPU check: each benchmark workload on the GPU (wgpu and CUDA), synced per
+step and pipelined (steps back to back, one sync at the end, as PyTorch's reference times itself),
 against PyTorch on the same GPU, and against 2 CPU cores where a file of `ins-cli bench` lines
 from a CPU is given; then the wall time of every stage (the lego runs, the SIREN main job).
 
@@ -34,21 +34,24 @@ def main():
     lines = json_lines(log)
     cpu = {l["workload"]: l for l in json_lines(sys.argv[2])} if len(sys.argv) > 2 else {}
     torch = {l["workload"]: l for l in lines if str(l.get("engine", "")).startswith("pytorch")}
-    ours = {}
+    ours = {}  # (backend, workload) -> line
     for l in lines:
-        if l.get("backend") == "wgpu":
-            ours[l["workload"] + (" (f16)" if l.get("precision") == "f16" else "")] = l
+        if l.get("backend") in ("wgpu", "cuda"):
+            name = l["workload"] + (" (f16)" if l.get("precision") == "f16" else "")
+            ours[(l["backend"], name)] = l
     fmt = lambda v: "–" if v is None else f"{v:.1f}"
     ratio = lambda a, b: "–" if a is None or not b else f"{a / b:.2f}×"
-    print("| workload | GPU ms/step (synced) | GPU ms/step (pipelined) | PyTorch CUDA ms/step | GPU ÷ PyTorch (pipelined / synced) | 2 CPU cores ms/step |")
+    print("| workload | wgpu ms/step synced / pipelined | CUDA ms/step synced / pipelined | PyTorch CUDA ms/step | best ÷ PyTorch (pipelined) | 2 CPU cores ms/step |")
     print("|---|---|---|---|---|---|")
-    for name in sorted(set(ours) | set(torch)):
+    for name in sorted({n for _, n in ours} | set(torch)):
         base = name.split(" (")[0]
-        o, t, c = ours.get(name, {}), torch.get(base, {}), cpu.get(base, {})
-        synced, piped = o.get("ms_per_step"), o.get("pipelined_ms_per_step")
+        w, c, t = ours.get(("wgpu", name), {}), ours.get(("cuda", name), {}), torch.get(base, {})
         ref = t.get("ms_per_step")
-        print(f"| {name} | {fmt(synced)} | {fmt(piped)} | {fmt(ref)} | "
-              f"{ratio(piped, ref)} / {ratio(synced, ref)} | {fmt(c.get('ms_per_step'))} |")
+        piped = [v for v in (w.get("pipelined_ms_per_step"), c.get("pipelined_ms_per_step")) if v]
+        best = min(piped) if piped else None
+        cell = lambda o: f"{fmt(o.get('ms_per_step'))} / {fmt(o.get('pipelined_ms_per_step'))}"
+        print(f"| {name} | {cell(w)} | {cell(c)} | {fmt(ref)} | {ratio(best, ref)} | "
+              f"{fmt(cpu.get(base, {}).get('ms_per_step'))} |")
     print()
     print("| stage | wall s | exit |")
     print("|---|---|---|")

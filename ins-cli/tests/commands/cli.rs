@@ -231,6 +231,30 @@ fn render_of_a_missing_run_is_a_clear_error() {
     );
 }
 
+/// `--backend cuda` where CUDA cannot run stops before the run starts, with one line naming
+/// what is missing and the other backends. `CUDA_PATH` points at an empty folder, so a machine
+/// with NVIDIA's driver and a GPU stops at the headers, and one without (CI) at the driver.
+#[test]
+fn cuda_where_it_cannot_run_names_what_is_missing_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_ins-cli"))
+        .args(["train", "siren", "--steps", "2", "--backend", "cuda"])
+        .arg("--out")
+        .arg(&out)
+        .env("CUDA_PATH", dir.path())
+        .output()
+        .expect("running ins-cli");
+    assert_clean_failure(&o, "--backend cuda: ");
+    let e = stderr(&o);
+    assert!(
+        e.contains("no NVIDIA driver (libcuda.so)") || e.contains("has no cuda_runtime.h"),
+        "{e}"
+    );
+    assert!(e.contains("--backend flex") && e.contains("--backend wgpu"), "{e}");
+    assert!(!out.exists(), "a failed start wrote {}", out.display());
+}
+
 #[test]
 fn two_styles_train_and_render_a_mix_and_a_strip() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,0 +1,142 @@
+//! The CUDA backend's runtime (`--backend cuda`): Burn's CubeCL runtime on NVIDIA's driver, its
+//! kernels (Burn's and this project's) compiled as CUDA C++ by NVRTC, matmuls on tensor cores.
+//!
+//! Why it is set up here: the driver (`libcuda`) and NVRTC are loaded at run time, so the program
+//! builds and starts on machines without CUDA; but CubeCL panics deep inside on a missing
+//! library, and `expect`s CUDA's headers (for NVRTC) only when it compiles its first kernel. Each
+//! piece is looked for before the first tensor, and a missing one stops the run at once with a
+//! message that names it and says what to do. The settings (kernel and tuning cache, tuning
+//! level) are the wgpu runtime's ([`crate::gpu::configure`]).
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use burn::prelude::*;
+
+use crate::gpu::{Adapter, AdapterKind, GpuError, GpuRuntime, configure};
+
+static RUNTIME: OnceLock<Result<GpuRuntime, GpuError>> = OnceLock::new();
+
+/// Sets up the CUDA runtime once per process (later calls return the first answer): checks the
+/// driver, a GPU, NVRTC and CUDA's headers, gives CubeCL its settings, and runs one small
+/// kernel so that a GPU or NVRTC that refuses fails here, with its reason.
+pub fn prepare(cache: &Path) -> Result<&'static GpuRuntime, GpuError> {
+    RUNTIME
+        .get_or_init(|| start(cache))
+        .as_ref()
+        .map_err(Clone::clone)
+}
+
+/// The runtime set up by [`prepare`], if it was.
+pub fn prepared() -> Option<&'static GpuRuntime> {
+    RUNTIME.get().and_then(|r| r.as_ref().ok())
+}
+
+/// The first CUDA device, after [`prepare`].
+pub fn device(cache: &Path) -> Result<Device, GpuError> {
+    prepare(cache)?;
+    Ok(Device::cuda(0))
+}
+
+fn error(message: impl Into<String>) -> GpuError {
+    GpuError::Cuda {
+        message: message.into(),
+    }
+}
+
+/// Where the other backends are, for every message.
+const WAYS_OUT: &str = "or run with --backend wgpu (Vulkan) or --backend flex (the CPU)";
+
+fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
+    let name = gpu_name()?;
+    headers()?;
+    // SAFETY: loads the NVRTC library by its usual names, and drops it.
+    if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+        return Err(error(format!(
+            "NVRTC (libnvrtc.so), which compiles the kernels, was not found: install the CUDA \
+             toolkit or put its lib64 folder on LD_LIBRARY_PATH, {WAYS_OUT}"
+        )));
+    }
+    let (cache, user_config, tuning) = configure(AdapterKind::Hardware, cache);
+    // One small sum: the first kernel NVRTC compiles and the GPU runs. CubeCL panics on
+    // failure; the panic is this backend's error here, not the run's.
+    let first = std::panic::catch_unwind(|| {
+        let device = Device::cuda(0);
+        Tensor::<1>::from_floats([1.0, 2.0, 3.0], &device)
+            .sum()
+            .into_scalar::<f32>()
+    });
+    match first {
+        Ok(v) if v == 6.0 => {}
+        Ok(v) => {
+            return Err(error(format!(
+                "a first kernel on {name} summed 1 + 2 + 3 to {v}, {WAYS_OUT}"
+            )));
+        }
+        Err(panic) => {
+            let why = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown failure".into());
+            return Err(error(format!(
+                "{name} did not run a first kernel: {}; {WAYS_OUT}",
+                why.lines().next().unwrap_or("")
+            )));
+        }
+    }
+    Ok(GpuRuntime {
+        backend: "cuda",
+        adapter: Adapter {
+            name,
+            api: "CUDA, kernels by NVRTC".into(),
+            kind: AdapterKind::Hardware,
+        },
+        cache,
+        user_config,
+        tuning,
+    })
+}
+
+/// The first GPU's name, from the driver.
+fn gpu_name() -> Result<String, GpuError> {
+    // SAFETY: loads the driver library by its usual names, and drops it.
+    if !unsafe { cudarc::driver::sys::is_culib_present() } {
+        return Err(error(format!(
+            "no NVIDIA driver (libcuda.so) on this machine: install the GPU's driver, {WAYS_OUT}"
+        )));
+    }
+    use cudarc::driver::result;
+    let fail = |what: &str, e: cudarc::driver::DriverError| {
+        error(format!("the NVIDIA driver {what}: {e}; {WAYS_OUT}"))
+    };
+    result::init().map_err(|e| fail("did not start", e))?;
+    let count = result::device::get_count().map_err(|e| fail("counted no GPU", e))?;
+    if count < 1 {
+        return Err(error(format!("the NVIDIA driver sees no GPU, {WAYS_OUT}")));
+    }
+    let dev = result::device::get(0).map_err(|e| fail("did not open GPU 0", e))?;
+    result::device::get_name(dev).map_err(|e| fail("did not name GPU 0", e))
+}
+
+/// CUDA's headers folder, which NVRTC compiles the kernels against: `$CUDA_PATH/include`, or
+/// under `/usr/local/cuda`, `/opt/cuda`, `/usr` (CubeCL's search).
+fn headers() -> Result<PathBuf, GpuError> {
+    let Some(root) = cubecl::cuda::install::cuda_path() else {
+        return Err(error(format!(
+            "CUDA's headers were not found (CUDA_PATH is unset and there is no /usr/local/cuda): \
+             NVRTC compiles the kernels against them; install the CUDA toolkit or set CUDA_PATH \
+             to a folder whose include/ holds cuda_runtime.h, {WAYS_OUT}"
+        )));
+    };
+    let include = root.join("include");
+    if include.join("cuda_runtime.h").is_file() {
+        Ok(include)
+    } else {
+        Err(error(format!(
+            "{} has no cuda_runtime.h: NVRTC compiles the kernels against CUDA's headers; set \
+             CUDA_PATH to a folder whose include/ holds them, {WAYS_OUT}",
+            include.display()
+        )))
+    }
+}
