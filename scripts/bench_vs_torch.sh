@@ -7,9 +7,10 @@
 #
 # --precision is INS-rs's VGG arithmetic (default: as `ins-cli`, bf16 on AMX where the CPU has
 # it, else f32); PyTorch stays in f32, as a user would run it.
-# Workloads: vgg siren nerf-pretrain nerf-stylize (default: all four). The reference program is
-# ../shared/bench/torch_ref.py (override with INS_TORCH_REF); the venv is .venv-torch (override
-# with INS_TORCH_VENV). Results also go to bench_vs_torch.jsonl.
+# Workloads: vgg siren nerf-pretrain nerf-stylize (default: these four), nerf-grid idr-pretrain.
+# The reference program is ../shared/bench/torch_ref.py (override with INS_TORCH_REF), and for
+# the two grid workloads scripts/torch_grid_ref.py; the venv is .venv-torch (override with
+# INS_TORCH_VENV). Results also go to bench_vs_torch.jsonl.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -22,7 +23,7 @@ while (($#)); do
     --steps) steps="$2"; shift 2 ;;
     --threads) threads="$2"; shift 2 ;;
     --precision) precision=(--precision "$2"); shift 2 ;;
-    -h|--help) sed -n 2,13p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,14p "$0"; exit 0 ;;
     *) workloads+=("$1"); shift ;;
   esac
 done
@@ -45,7 +46,9 @@ out=bench_vs_torch.jsonl
 : > "$out"
 for w in "${workloads[@]}"; do
   echo "== $w: PyTorch, then INS-rs ($steps steps each after a warm-up)" >&2
-  OMP_NUM_THREADS="$threads" "$venv/bin/python" "$ref" --threads "$threads" --steps "$steps" "$w" \
+  program=$ref
+  case "$w" in nerf-grid|idr-pretrain) program=scripts/torch_grid_ref.py ;; esac
+  OMP_NUM_THREADS="$threads" "$venv/bin/python" "$program" --threads "$threads" --steps "$steps" "$w" \
     | grep '^{' >> "$out"
   RAYON_NUM_THREADS="$threads" "$cli" bench "$w" --steps "$steps" "${precision[@]}" \
     | grep '^{' >> "$out"

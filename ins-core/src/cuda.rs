@@ -9,27 +9,23 @@
 //! level) are the wgpu runtime's ([`crate::gpu::configure`]).
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use burn::prelude::*;
 
-use crate::gpu::{Adapter, AdapterKind, GpuError, GpuRuntime, configure};
+use crate::gpu::{Adapter, AdapterKind, GpuError, GpuRuntime, RuntimeOnce, configure};
 
-static RUNTIME: OnceLock<Result<GpuRuntime, GpuError>> = OnceLock::new();
+static RUNTIME: RuntimeOnce = RuntimeOnce::new();
 
 /// Sets up the CUDA runtime once per process (later calls return the first answer): checks the
 /// driver, a GPU, NVRTC and CUDA's headers, gives CubeCL its settings, and runs one small
 /// kernel so that a GPU or NVRTC that refuses fails here, with its reason.
 pub fn prepare(cache: &Path) -> Result<&'static GpuRuntime, GpuError> {
-    RUNTIME
-        .get_or_init(|| start(cache))
-        .as_ref()
-        .map_err(Clone::clone)
+    RUNTIME.get_or_start(|| start(cache))
 }
 
 /// The runtime set up by [`prepare`], if it was.
 pub fn prepared() -> Option<&'static GpuRuntime> {
-    RUNTIME.get().and_then(|r| r.as_ref().ok())
+    RUNTIME.ready()
 }
 
 /// The first CUDA device, after [`prepare`].
@@ -67,7 +63,7 @@ fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
             .into_scalar::<f32>()
     });
     match first {
-        Ok(v) if v == 6.0 => {}
+        Ok(6.0) => {}
         Ok(v) => {
             return Err(error(format!(
                 "a first kernel on {name} summed 1 + 2 + 3 to {v}, {WAYS_OUT}"

@@ -248,24 +248,40 @@ pub(crate) fn configure(
 /// CubeCL's words when a device's server is registered already.
 const ALREADY_REGISTERED: &str = "Service already initialized";
 
-static RUNTIME: OnceLock<Result<GpuRuntime, GpuError>> = OnceLock::new();
+/// A backend's runtime, set up once per process: the first answer, kept for later calls.
+pub(crate) struct RuntimeOnce(OnceLock<Result<GpuRuntime, GpuError>>);
+
+impl RuntimeOnce {
+    pub(crate) const fn new() -> Self {
+        Self(OnceLock::new())
+    }
+
+    /// The runtime `start` sets up, the first time; its first answer after.
+    pub(crate) fn get_or_start(
+        &'static self,
+        start: impl FnOnce() -> Result<GpuRuntime, GpuError>,
+    ) -> Result<&'static GpuRuntime, GpuError> {
+        self.0.get_or_init(start).as_ref().map_err(Clone::clone)
+    }
+
+    /// The runtime, if it was set up.
+    pub(crate) fn ready(&'static self) -> Option<&'static GpuRuntime> {
+        self.0.get().and_then(|r| r.as_ref().ok())
+    }
+}
+
+static RUNTIME: RuntimeOnce = RuntimeOnce::new();
 
 /// Sets up the wgpu runtime once per process (later calls return the first answer): finds the
 /// adapter, gives CubeCL its settings unless a user config applies, and starts the device so
 /// that a driver that refuses fails here, with its reason.
 pub fn prepare(cache: &Path) -> Result<&'static GpuRuntime, GpuError> {
-    RUNTIME
-        .get_or_init(|| start(cache))
-        .as_ref()
-        .map_err(Clone::clone)
+    RUNTIME.get_or_start(|| start(cache))
 }
 
 /// The GPU runtime set up by [`prepare`] or [`crate::cuda::prepare`], if one was.
 pub fn prepared() -> Option<&'static GpuRuntime> {
-    RUNTIME
-        .get()
-        .and_then(|r| r.as_ref().ok())
-        .or_else(crate::cuda::prepared)
+    RUNTIME.ready().or_else(crate::cuda::prepared)
 }
 
 fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {

@@ -17,11 +17,13 @@ metrics() { cut -c1-240 "$1/metrics.jsonl" 2>/dev/null | tail -"$2"; }
 cuda_env
 stamp "setup done"
 # 0. Burn's CUDA backend (NVRTC, tensor cores), never run before: the workloads PyTorch also
-# runs, PyTorch itself and wgpu for the ratios, then the lego pretrain twice (cold, then with its
-# kernels cached), its stylization and the SIREN main job.
+# runs, PyTorch itself (the grid workloads' counterparts in torch_grid_ref.py) and wgpu for the
+# ratios, then the lego pretrain twice (cold, then with its kernels cached), its stylization
+# and the SIREN main job.
 stage bench_cuda 120 $BIN bench --backend cuda --steps 3 siren vgg nerf-pretrain nerf-stylize idr-pretrain nerf-grid
 stage torch 40 python3 .dev/torch_ref.py --device cuda --steps 5
-stage bench_ref 90 $BIN bench --backend wgpu --steps 3 siren vgg nerf-pretrain nerf-stylize
+stage torch_grid 60 python3 scripts/torch_grid_ref.py --device cuda --steps 5
+stage bench_ref 90 $BIN bench --backend wgpu --steps 3 siren vgg nerf-pretrain nerf-stylize idr-pretrain nerf-grid
 stage lego_pretrain_cuda_cold 120 $BIN train nerf --scene .dev/lego200 --out $R/lego_cuda --quiet --backend cuda
 metrics $R/lego_cuda 3
 stage lego_pretrain_cuda_warm 60 $BIN train nerf --scene .dev/lego200 --out $R/lego_cuda2 --quiet --backend cuda

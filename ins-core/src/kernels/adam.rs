@@ -1,7 +1,7 @@
 //! Adam in one pass over each parameter on Flex: the trainer's optimizer.
 //!
 //! Burn's Adam is a dozen tensor ops per parameter, each allocating and filling a tensor of
-//! the parameter's size. For small networks that is noise; for a hash table of 16.8 M entries
+//! the parameter's size. For small networks that is noise; for a hash table of 12.2 M entries
 //! (IDR's appearance grid) it took 35 ms a step, two fifths of the step. This optimizer does
 //! the same arithmetic element by element, reading the gradient and writing the parameter and
 //! both moments once, in place where Flex owns them alone. Its state is Burn's [`AdamState`]

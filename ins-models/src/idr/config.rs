@@ -135,7 +135,7 @@ pub struct IdrRunConfig {
     pub color_width: usize,
     /// Finest resolution of an appearance hash grid in the colour network (0: none; default:
     /// the volume renderer 2047, the surface renderer none): texture finer than the SDF's grid,
-    /// which has to stay coarse for smooth normals, can hold. Its 16.8 M parameters make a run
+    /// which has to stay coarse for smooth normals, can hold. Its 12.2 M parameters make a run
     /// folder about 350 MB instead of 80, the peak memory about 0.9 GB instead of 0.5 and a
     /// volume step about an eighth longer. On scan37 the volume's defaults gained 0.5 dB held
     /// out with it (21.47 / 21.35 dB against 20.82 / 20.77 over seeds 0 / 1, IoU the same or

@@ -198,7 +198,7 @@ impl IdrArch {
     }
 
     /// The colour network's appearance grid, when there is one. Its table is larger than the
-    /// SDF's (2^19 entries a level, 16.8 M parameters): texture needs the capacity, and a
+    /// SDF's (2^19 entries a hashed level, 12.2 M parameters): texture needs the capacity, and a
     /// collision there blurs a colour rather than bending the surface.
     fn color_hash_grid(&self) -> Option<HashGridConfig> {
         (self.color_grid > 0).then(|| {

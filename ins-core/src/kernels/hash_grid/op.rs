@@ -88,7 +88,7 @@ fn flex_from(values: Vec<f32>, shape: impl Into<burn::backend::Shape>) -> FlexTe
     FlexTensor::from_data(TensorData::new(values, shape.into()))
 }
 
-/// A table's gradient, zeroed by all threads: it is tens of MB (the colour grid's 16.8 M
+/// A table's gradient, zeroed by all threads: it is tens of MB (the colour grid's 12.2 M
 /// floats), and one thread's memset left the other cores idle for a few ms every step.
 fn zeroed_table(layout: &kernel::Layout) -> Vec<f32> {
     let n = layout.total_rows() * layout.features;
