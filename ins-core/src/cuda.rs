@@ -8,7 +8,7 @@
 //! message that names it and says what to do. The settings (kernel and tuning cache, tuning
 //! level) are the wgpu runtime's ([`crate::gpu::configure`]).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use burn::prelude::*;
 
@@ -115,9 +115,9 @@ fn gpu_name() -> Result<String, GpuError> {
     result::device::get_name(dev).map_err(|e| fail("did not name GPU 0", e))
 }
 
-/// CUDA's headers folder, which NVRTC compiles the kernels against: `$CUDA_PATH/include`, or
-/// under `/usr/local/cuda`, `/opt/cuda`, `/usr` (CubeCL's search).
-fn headers() -> Result<PathBuf, GpuError> {
+/// Whether CUDA's headers, which NVRTC compiles the kernels against, are where CubeCL looks:
+/// `$CUDA_PATH/include`, or under `/usr/local/cuda`, `/opt/cuda`, `/usr`.
+fn headers() -> Result<(), GpuError> {
     let Some(root) = cubecl::cuda::install::cuda_path() else {
         return Err(error(format!(
             "CUDA's headers were not found (CUDA_PATH is unset and there is no /usr/local/cuda): \
@@ -127,7 +127,7 @@ fn headers() -> Result<PathBuf, GpuError> {
     };
     let include = root.join("include");
     if include.join("cuda_runtime.h").is_file() {
-        Ok(include)
+        Ok(())
     } else {
         Err(error(format!(
             "{} has no cuda_runtime.h: NVRTC compiles the kernels against CUDA's headers; set \

@@ -251,7 +251,10 @@ fn cuda_where_it_cannot_run_names_what_is_missing_and_writes_nothing() {
         e.contains("no NVIDIA driver (libcuda.so)") || e.contains("has no cuda_runtime.h"),
         "{e}"
     );
-    assert!(e.contains("--backend flex") && e.contains("--backend wgpu"), "{e}");
+    assert!(
+        e.contains("--backend flex") && e.contains("--backend wgpu"),
+        "{e}"
+    );
     assert!(!out.exists(), "a failed start wrote {}", out.display());
 }
 

@@ -81,9 +81,10 @@ impl Compiler for PlironCompiler {
         _options: &Self::CompilationOptions,
     ) -> Result<Self::Representation, CompilationError> {
         Err(CompilationError::Generic {
-            reason: "CubeCL's LLVM backend is not built into INS-rs (third_party/cubecl-llvm-absent): \
+            reason:
+                "CubeCL's LLVM backend is not built into INS-rs (third_party/cubecl-llvm-absent): \
                      CUDA kernels compile through NVRTC (the `cubecl/cuda-cpp` feature)"
-                .to_string(),
+                    .to_string(),
             backtrace: BackTrace::capture(),
         })
     }
