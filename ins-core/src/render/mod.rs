@@ -3,6 +3,7 @@
 //! rays and patches come from `ins-scene`, in its one camera convention.
 
 pub mod beyond_sphere;
+pub mod flagged_picks;
 pub mod gather;
 pub mod occupancy;
 pub mod samplers;

@@ -2,8 +2,8 @@
 //! random step near the surface, which keeps a hash-grid surface from bending to explain texture.
 
 use burn::prelude::*;
+use ins_core::render::flagged_picks::pick_flagged;
 use ins_core::render::gather::select_parallel;
-use ins_core::shape_buckets::{padded_size, sum_counted};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
@@ -16,35 +16,21 @@ use super::model::IdrModel;
 const CURVATURE_STEP: f32 = 0.01;
 
 /// The smoothness term: the mean squared change of the SDF's gradient `g` (rows of `points`)
-/// over a step of [`CURVATURE_STEP`] in a random direction, at up to `k` of the samples `seen`
-/// (drawn by `seed`). Zero when nothing was seen.
+/// over a step of [`CURVATURE_STEP`] in a random direction, at up to `k` of the samples flagged
+/// in `seen [N]` (all of them when there are at most `k`, else one from each of `k` strata,
+/// chosen on the device by `seed`: [`pick_flagged`]). Zero when nothing was seen.
 pub(super) fn gradient_change(
     model: &IdrModel,
     points: &Tensor<2>,
     g: &Tensor<2>,
-    seen: &[usize],
+    seen: &Tensor<1>,
     k: usize,
     seed: u64,
 ) -> Tensor<1> {
     let device = points.device();
-    if seen.is_empty() {
-        return Tensor::zeros([1], &device);
-    }
+    let (index, counted) = pick_flagged(seen.clone(), k, seed ^ 0xc0be);
     let mut rng = SmallRng::seed_from_u64(seed ^ 0xc0be);
-    let chosen: Vec<i64> = if seen.len() <= k {
-        seen.iter().map(|&i| i as i64).collect()
-    } else {
-        rand::seq::index::sample(&mut rng, seen.len(), k)
-            .into_iter()
-            .map(|j| seen[j] as i64)
-            .collect()
-    };
-    let m = chosen.len();
-    // Padded to a bucketed count on GPUs (copies of the first point, left out of the mean).
-    let padded = padded_size(m, &device);
-    let mut chosen = chosen;
-    chosen.resize(padded, chosen[0]);
-    let steps: Vec<f32> = (0..padded)
+    let steps: Vec<f32> = (0..k)
         .flat_map(|_| {
             let d = loop {
                 let v = [0; 3].map(|_| rng.random::<f32>() * 2.0 - 1.0);
@@ -56,13 +42,12 @@ pub(super) fn gradient_change(
             d.map(|c| c * CURVATURE_STEP)
         })
         .collect();
-    let index = Tensor::<1, Int>::from_data(TensorData::new(chosen, [padded]), &device);
     let here = select_parallel(points.clone(), 0, index.clone());
-    let there = here + Tensor::<1>::from_floats(steps.as_slice(), &device).reshape([padded, 3]);
+    let there = here + Tensor::<1>::from_floats(steps.as_slice(), &device).reshape([k, 3]);
     let g_there = model.sdf.forward_with_gradient(there).2;
     let change = (select_parallel(g.clone(), 0, index) - g_there)
         .square()
         .sum_dim(1)
-        .reshape([padded]);
-    sum_counted(change, m).div_scalar(m as f32)
+        .reshape([k]);
+    (change * counted.clone()).sum() / counted.sum().clamp_min(1.0)
 }

@@ -7,12 +7,12 @@
 //! forward-mode tangents, a colour and their backward.
 
 use burn::prelude::*;
+use ins_core::kernels::flex::on_flex;
 use ins_core::render::beyond_sphere::render_beyond_unit_sphere;
 use ins_core::render::gather::select_parallel;
 use ins_core::render::samplers::{draw_from_weights, stratified};
 use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
 use ins_core::render::sort_rows::{sort_rows, sort_rows_with_indices};
-use ins_core::shape_buckets::padded_size;
 use ins_scene::geometry::{Bounds, Vec3};
 use ins_scene::rays::{Rays, flatten};
 use serde::{Deserialize, Serialize};
@@ -86,9 +86,9 @@ pub struct VolumeRender {
     pub live_count: usize,
     /// The sample positions `[R·N, 3]`.
     pub points: Tensor<2>,
-    /// The samples (rows of `points`) whose colour counts: those of sections weighing at
-    /// least [`SEEN`], near the surface.
-    pub seen: Vec<usize>,
+    /// 1 for the samples (rows of `points`) whose colour counts, 0 for the others `[R·N]`:
+    /// the ends of sections weighing at least [`SEEN`], near the surface.
+    pub seen: Tensor<1>,
 }
 
 /// Each ray's interval inside the unit sphere, `(0, 0)` for rays that miss it.
@@ -340,10 +340,26 @@ fn sharpness(model: &IdrModel, opts: &VolumeSampling, device: &Device) -> Tensor
 /// pixel by less than this.
 const SEEN: f32 = 1e-4;
 
-/// The colour `[S, R·N, 3]` at the samples whose section weights `w [R, N − 1]` reach [`SEEN`],
-/// zero elsewhere, and those samples' indices. The SDF's gradient `g` at every sample, or
-/// `None` to compute it at those samples only. Most samples of a ray lie in empty space or behind the surface, and the
-/// colour network (with the SIM and AM when stylizing) is most of a sample's cost.
+/// Which samples' colour counts, `[R·N]` (1 or 0) for section weights `w [R, N − 1]`: both
+/// ends of every section weighing at least [`SEEN`].
+fn seen_samples(w: &Tensor<2>) -> Tensor<1> {
+    let [r, sections] = w.dims();
+    let heavy = w.clone().detach().greater_equal_elem(SEEN).float();
+    let none = Tensor::zeros([r, 1], &w.device());
+    let ends_before = Tensor::cat(vec![heavy.clone(), none.clone()], 1);
+    let ends_after = Tensor::cat(vec![none, heavy], 1);
+    ends_before
+        .max_pair(ends_after)
+        .reshape([r * (sections + 1)])
+}
+
+/// The colour `[S, R·N, 3]` at the samples flagged in `seen [R·N]`, zero elsewhere. The SDF's
+/// gradient `g` at every sample, or `None` to compute it where the colour is computed. Most
+/// samples of a ray lie in empty space or behind the surface, and the colour network (with
+/// the SIM and AM when stylizing) is most of a sample's cost: on the CPU the seen samples are
+/// picked on the host and coloured alone. Off the CPU every sample is coloured and the unseen
+/// ones zeroed, the same values and gradients: picking would read `seen` back in the middle of
+/// the step, and the GPU would wait for the host (issue 48), for work a GPU does in parallel.
 #[allow(clippy::too_many_arguments)]
 fn shade_where_seen(
     model: &IdrModel,
@@ -352,44 +368,44 @@ fn shade_where_seen(
     v: Tensor<2>,
     features: Tensor<2>,
     codes: Option<Tensor<2>>,
-    w: &Tensor<2>,
+    seen: &Tensor<1>,
     device: &Device,
-) -> (Tensor<3>, Vec<usize>) {
-    let [r, sections] = w.dims();
-    let n = sections + 1;
+) -> Tensor<3> {
+    let [m] = seen.dims();
+    if !on_flex(seen) {
+        let normals = match g {
+            Some(g) => g,
+            None => model.sdf.forward_with_gradient(x.clone()).2,
+        };
+        let colour = model.shade(x, normals, v, features, codes); // [S, R·N, 3]
+        let styles = colour.dims()[0];
+        return colour * seen.clone().reshape([1, m, 1]).expand([styles, m, 3]);
+    }
     let styles = codes.as_ref().map_or(1, |c| c.dims()[0]);
-    let weights = host(w.clone().inner());
-    let mut seen = vec![false; r * n];
-    for (i, &wi) in weights.iter().enumerate() {
-        if wi >= SEEN {
-            let (ray, k) = (i / sections, i % sections);
-            seen[ray * n + k] = true;
-            seen[ray * n + k + 1] = true;
-        }
-    }
-    let picked: Vec<i64> = (0..r * n).filter(|&j| seen[j]).map(|j| j as i64).collect();
+    let picked: Vec<i64> = host(seen.clone().inner())
+        .iter()
+        .enumerate()
+        .filter(|&(_, &f)| f > 0.5)
+        .map(|(j, _)| j as i64)
+        .collect();
     if picked.is_empty() {
-        return (Tensor::zeros([styles, r * n, 3], device), Vec::new());
+        return Tensor::zeros([styles, m, 3], device);
     }
-    // On GPUs the count is padded to a bucket (copies of the first pick, read by no sample).
-    let k = padded_size(picked.len(), device);
-    let mut index = picked.clone();
-    index.resize(k, picked[0]);
-    let index = Tensor::<1, Int>::from_data(TensorData::new(index, [k]), device);
+    let k = picked.len();
+    let index = Tensor::<1, Int>::from_data(TensorData::new(picked.clone(), [k]), device);
     let pick = |t: Tensor<2>| select_parallel(t, 0, index.clone());
     let normals = match g {
         Some(g) => pick(g),
         None => model.sdf.forward_with_gradient(pick(x.clone())).2,
     };
     let colour = model.shade(pick(x), normals, pick(v), pick(features), codes); // [S, K, 3]
-    let mut back = vec![k as i64; r * n];
+    let mut back = vec![k as i64; m];
     for (slot, &j) in picked.iter().enumerate() {
         back[j as usize] = slot as i64;
     }
-    let back = Tensor::<1, Int>::from_data(TensorData::new(back, [r * n]), device);
+    let back = Tensor::<1, Int>::from_data(TensorData::new(back, [m]), device);
     let padded = Tensor::cat(vec![colour, Tensor::zeros([styles, 1, 3], device)], 1);
-    let seen = picked.iter().map(|&j| j as usize).collect();
-    (select_parallel(padded, 1, back), seen)
+    select_parallel(padded, 1, back)
 }
 
 /// The SDF (with its gradient at every sample when `every_gradient`) and the colour at samples
@@ -436,8 +452,17 @@ fn composite_samples(
     let centres = z.clone().slice([0..r, 0..n - 1]) + lengths.mul_scalar(0.5);
     let depth = (w.clone() * centres).sum_dim(1).reshape([r]) / opacity.clone().clamp_min(1e-6);
     // A section's colour: the mean of its ends'.
-    let (colour, seen) =
-        shade_where_seen(model, x.clone(), g.clone(), v, features, codes, &w, &device);
+    let seen = seen_samples(&w);
+    let colour = shade_where_seen(
+        model,
+        x.clone(),
+        g.clone(),
+        v,
+        features,
+        codes,
+        &seen,
+        &device,
+    );
     let styles = colour.dims()[0];
     let colour = colour.reshape([styles, r, n, 3]);
     let sections = (colour.clone().slice([0..styles, 0..r, 0..n - 1, 0..3])

@@ -369,6 +369,39 @@ fn ray_samples_sort_on_wgpu_as_on_the_host() {
     }
 }
 
+/// The smoothness term's picks among the samples seen, made on the device, are the host's
+/// exactly (integer arithmetic): with fewer flagged than picks and with more.
+#[test]
+fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
+    use ins_core::render::flagged_picks::pick_flagged;
+    let flags: Vec<f32> = (0..3000)
+        .map(|j| (j % 7 == 0 || j % 11 == 3) as u8 as f32)
+        .collect();
+    let on = move |device: &Device| -> Vec<(Vec<i64>, Vec<f32>)> {
+        [64, 1024]
+            .into_iter()
+            .map(|k| {
+                let (index, weight) =
+                    pick_flagged(Tensor::<1>::from_floats(flags.as_slice(), device), k, 5);
+                let index = index.into_data().convert::<i64>();
+                (index.try_to_vec::<i64>().unwrap(), values(weight))
+            })
+            .collect()
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(
+        ins_tests::WGPU_LIMIT_S,
+        "picking flagged samples",
+        move || on(&BackendChoice::Wgpu.device()),
+    );
+    assert_eq!(
+        flex[1].1.iter().sum::<f32>(),
+        663.0,
+        "all 663 flagged, then fillers"
+    );
+    assert_eq!(wgpu, flex, "the picks differ from the host's");
+}
+
 #[test]
 fn an_idr_stylization_step_has_the_same_loss_and_gradients_on_wgpu() {
     let dir = tempfile::tempdir().unwrap();
