@@ -161,7 +161,15 @@ pub(crate) fn filled(n: usize, fill: impl Fn(usize, &mut [MaybeUninit<f32>]) + S
 /// Whether `x` lives on Flex (with or without autodiff): where the hand-written ops run, and
 /// where reading a value back costs nothing.
 pub fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
-    matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_))
+    is_flex(&x.device())
+}
+
+/// Whether `device` is Flex (with or without autodiff); see [`on_flex`].
+pub fn is_flex(device: &Device) -> bool {
+    matches!(
+        device.clone().inner().as_dispatch(),
+        DispatchDevice::Flex(_)
+    )
 }
 
 /// The widest vector instructions this CPU offers the element-wise kernels (sine, softplus,

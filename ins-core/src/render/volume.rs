@@ -30,6 +30,17 @@ pub fn weights(sigma: Tensor<2>, delta: Tensor<2>) -> Tensor<2> {
     transmittance * alpha
 }
 
+/// 1 for the samples whose transmittance in front of them is at least `min_transmittance`, 0
+/// for those behind, `[R, S]`, under densities `sigma [R, S]` and spacings `delta [R, S]`: the
+/// samples [`MarchedSamples::until_opaque`](super::occupancy::MarchedSamples::until_opaque)
+/// keeps, found on the device. Multiplying the densities by it gives the render of the kept
+/// samples alone, without reading the densities back. No gradient flows through it.
+pub fn in_front_of_opaque(sigma: Tensor<2>, delta: Tensor<2>, min_transmittance: f32) -> Tensor<2> {
+    let tau = sigma.detach().clamp_min(0.0) * delta.detach();
+    let in_front = tau.clone().cumsum(1) - tau;
+    in_front.lower_equal_elem(-min_transmittance.ln()).float()
+}
+
 /// Composites samples: `sigma [R, S]`, `rgb [R, S, 3]`, `t [R, S]`, `delta [R, S]`; the part of
 /// each ray that nothing stops shows `background` (white for NeRF-synthetic scenes, black
 /// elsewhere).
@@ -136,5 +147,59 @@ mod tests {
             assert!((w[i] - want).abs() < 1e-6);
             acc += sigma[i] * delta[i];
         }
+    }
+
+    /// The mask keeps exactly the samples the host's `until_opaque` keeps.
+    #[test]
+    fn the_samples_in_front_of_opaque_are_those_the_host_keeps() {
+        use crate::render::occupancy::MarchedSamples;
+        let d = Device::flex();
+        let (r, w) = (6, 12);
+        let mut m = MarchedSamples::default();
+        let (mut sigma, mut delta) = (vec![0f32; r * w], vec![0f32; r * w]);
+        let mut density = Vec::new();
+        m.offsets.push(0);
+        for ray in 0..r {
+            let len = 4 + ray; // the rest of the row is padding (δ = 0)
+            for j in 0..len {
+                let s = ((j * 7 + ray * 3) % 5) as f32 * ray as f32;
+                let dt = 0.1 + 0.05 * (j % 3) as f32;
+                sigma[ray * w + j] = s;
+                delta[ray * w + j] = dt;
+                density.push(s);
+                m.ray.push(ray as u32);
+                m.t.push(j as f32);
+                m.delta.push(dt);
+            }
+            m.offsets.push(m.t.len() as u32);
+        }
+        let min_t = 1.0 / 512.0;
+        let (_, kept) = m.until_opaque(&density, min_t);
+        let mask = in_front_of_opaque(
+            row(&sigma, &d).reshape([r, w]),
+            row(&delta, &d).reshape([r, w]),
+            min_t,
+        )
+        .into_data()
+        .to_vec::<f32>()
+        .unwrap();
+        let mut want = vec![0f32; r * w];
+        for k in kept {
+            let k = k as usize;
+            let ray = m.ray[k] as usize;
+            want[ray * w + (k - m.offsets[ray] as usize)] = 1.0;
+        }
+        for ray in 0..r {
+            let len = 4 + ray;
+            assert_eq!(
+                &mask[ray * w..ray * w + len],
+                &want[ray * w..ray * w + len],
+                "ray {ray}"
+            );
+        }
+        assert!(
+            want.iter().sum::<f32>() < (r * 4 + 15) as f32,
+            "some samples lie behind"
+        );
     }
 }

@@ -9,7 +9,7 @@
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
 use ins_core::render::occupancy::{MarchedSamples, OccupancyGrid};
-use ins_core::shape_buckets::{compiles_per_size, pad_rows, padded_size};
+use ins_core::shape_buckets::{pad_rows, padded_size};
 
 use super::model::NerfModel;
 use super::render::RenderRays;
@@ -189,10 +189,10 @@ pub fn render_looks(
 /// The geometry of `m`'s samples along `rays` up to where each ray turns opaque: the samples
 /// [`MarchedSamples::until_opaque`] keeps, the raw density `[E]` and features `[E, F]` of
 /// every sample evaluated, and the kept samples' rows in them. What a stylization step that
-/// keeps the density shades. On the CPU the samples are evaluated in rounds of growing length,
-/// so that most of those behind a surface are not (half of a capture's marched samples);
-/// where kernels are compiled per size (GPUs) in one round, as each round reads the
-/// densities back.
+/// keeps the density shades on the CPU. The samples are evaluated in rounds of growing
+/// length, so that most of those behind a surface are not (half of a capture's marched
+/// samples). Each round reads the densities back: off the CPU the step masks them on the
+/// device instead (`render.rs`, [`in_front_of_opaque`](ins_core::render::volume::in_front_of_opaque)).
 pub(crate) fn geometry_until_opaque(
     model: &NerfModel,
     rays: &RenderRays,
@@ -209,11 +209,7 @@ pub(crate) fn geometry_until_opaque(
     let mut row_of = vec![0u32; m.len()];
     let (mut raws, mut features) = (Vec::new(), Vec::new());
     let mut rows = 0;
-    let mut round = if compiles_per_size(device) {
-        usize::MAX
-    } else {
-        FIRST_ROUND
-    };
+    let mut round = FIRST_ROUND;
     loop {
         let index = m.next_round(&mut cursor, &transmittance, min_transmittance, round);
         if index.is_empty() {

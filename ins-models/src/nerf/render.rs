@@ -2,10 +2,11 @@
 //! variant, coarse-to-fine for the MLP), evaluate the field (under every style), composite.
 
 use burn::prelude::*;
+use ins_core::kernels::flex::is_flex;
 use ins_core::render::gather::select_parallel;
 use ins_core::render::occupancy::{MarchedSamples, OccupancyGrid};
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
-use ins_core::render::volume::{Composite, composite};
+use ins_core::render::volume::{Composite, composite, in_front_of_opaque};
 use ins_core::shape_buckets::{pad_rows, padded_size};
 use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
@@ -187,9 +188,14 @@ fn render_marched(
 ) -> Rendered {
     let r = rays.len();
     let mut m = grid.march(&rays.rays, max_per_ray, seed);
-    // With `until_opaque`, the geometry of the samples evaluated and the kept ones' rows.
+    // With `until_opaque` on the CPU, the geometry of the samples evaluated and the kept ones'
+    // rows. Off the CPU, choosing the samples would read the densities back in the middle of
+    // the step (the GPU waiting for the host, issue 48): every sample is shaded there, and
+    // those behind where their ray turns opaque are given no density, which composites the
+    // same pixels.
+    let on_cpu = is_flex(device);
     let mut geometry = None;
-    if let Some(min_transmittance) = until_opaque.filter(|_| !m.is_empty()) {
+    if let Some(min_transmittance) = until_opaque.filter(|_| on_cpu && !m.is_empty()) {
         let (kept, raw, features, rows) =
             geometry_until_opaque(model, rays, grid, &m, min_transmittance, device);
         m = kept;
@@ -253,14 +259,20 @@ fn render_marched(
         index.clone(),
     )
     .reshape([s * r, width]);
+    let t = repeat_rows(tensor2(t_pad, r, width, device), s);
+    let delta = repeat_rows(tensor2(delta_pad, r, width, device), s);
+    let density = match until_opaque.filter(|_| !on_cpu) {
+        Some(min_transmittance) => {
+            density.clone() * in_front_of_opaque(density, delta.clone(), min_transmittance)
+        }
+        None => density,
+    };
     let rgb = select_parallel(
         Tensor::cat(vec![ev.rgb, Tensor::zeros([s, 1, 3], device)], 1),
         1,
         index,
     )
     .reshape([s * r, width, 3]);
-    let t = repeat_rows(tensor2(t_pad, r, width, device), s);
-    let delta = repeat_rows(tensor2(delta_pad, r, width, device), s);
     Rendered {
         fine: composite(density, rgb, t, delta, background),
         coarse_rgb: None,
