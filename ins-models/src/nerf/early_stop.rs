@@ -4,7 +4,7 @@
 //! and a ray whose transmittance fell below a threshold ([`INVISIBLE_TRANSMITTANCE`] for
 //! pictures) takes no more samples. On lego, most samples of a surface ray lie inside the
 //! object, behind its surface. A stylization step that keeps the density reads it in the same
-//! rounds ([`geometry_until_opaque`]).
+//! rounds on the CPU ([`geometry_until_opaque`]).
 
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
