@@ -18,14 +18,15 @@ const OFFSET_STEPS: i64 = 1024;
 
 /// `k` picks among the entries of `flags [N]` that are 1 (the others 0): their indices `[k]`
 /// and weights `[k]`, 1 for a pick and 0 for a filler (index 0) when fewer than `k` are
-/// flagged. With `T ≥ k` flagged, pick `i` is the flagged entry of rank `⌊(i + uᵢ)·T/k⌋`,
-/// `uᵢ` drawn in `[0, 1)` by `seed` in steps of 1/1024: one from each of `k` equal strata of the
-/// ranks, in order. Integers on the device are 32 bits: `k·N` (and `1024·N`) must stay under 2³¹.
+/// flagged. With `T ≥ k` flagged, stratum `i` holds the ranks from `⌊i·T/k⌋` up to
+/// `⌊(i+1)·T/k⌋` and pick `i` takes the flagged entry at `uᵢ/1024` of the way through it, `uᵢ`
+/// drawn by `seed`: one pick per stratum, in order. The ranks are split as `i·⌊T/k⌋ +
+/// ⌊i·(T mod k)/k⌋`, so that no product outgrows 32-bit integers (the device's) for any `N`.
 pub fn pick_flagged(flags: Tensor<1>, k: usize, seed: u64) -> (Tensor<1, Int>, Tensor<1>) {
     let [n] = flags.dims();
     assert!(
-        (k.max(OFFSET_STEPS as usize) as u64) * (n as u64) < 1 << 31,
-        "{k} picks among {n} entries overflow 32-bit ranks"
+        (k as u64).pow(2) < 1 << 31,
+        "{k} picks: their strata overflow 32-bit integers"
     );
     let device = flags.device();
     let flags = flags.detach();
@@ -38,12 +39,18 @@ pub fn pick_flagged(flags: Tensor<1>, k: usize, seed: u64) -> (Tensor<1, Int>, T
     let entries = Tensor::<1, Int>::arange(0..n as i64, &device) * flagged;
     let table =
         Tensor::<1, Int>::zeros([n + 1], &device).scatter(0, slot, entries, IndexingUpdateOp::Add);
+    // Where stratum i starts, ⌊i·T/k⌋, for i = 0 ..= k.
+    let share = total.clone().div_scalar(k as i64); // ⌊T/k⌋
+    let rest = total.clone().remainder_scalar(k as i64); // T mod k
+    let start =
+        |i: Tensor<1, Int>| i.clone() * share.clone() + (i * rest.clone()).div_scalar(k as i64);
+    let i = Tensor::<1, Int>::arange(0..k as i64, &device);
+    let first = start(i.clone());
+    let width = start(i.clone().add_scalar(1)) - first.clone();
     let mut rng = SmallRng::seed_from_u64(seed);
     let u: Vec<i64> = (0..k).map(|_| rng.random_range(0..OFFSET_STEPS)).collect();
     let u = Tensor::<1, Int>::from_data(TensorData::new(u, [k]), &device);
-    let i = Tensor::<1, Int>::arange(0..k as i64, &device);
-    let within = (u * total.clone()).div_scalar(OFFSET_STEPS);
-    let strata = (i.clone() * total.clone() + within).div_scalar(k as i64);
+    let strata = first + (u * width).div_scalar(OFFSET_STEPS);
     let rank = i
         .clone()
         .mask_where(total.clone().greater_equal_elem(k as i64), strata)
