@@ -67,8 +67,12 @@ mod tests {
         let d = Device::flex();
         let (index, weight) = pick_flagged(Tensor::<1>::from_floats(flags, &d), k, seed);
         (
-            index.into_data().convert::<i64>().to_vec::<i64>().unwrap(),
-            weight.into_data().to_vec::<f32>().unwrap(),
+            index
+                .into_data()
+                .convert::<i64>()
+                .try_to_vec::<i64>()
+                .unwrap(),
+            weight.into_data().try_to_vec::<f32>().unwrap(),
         )
     }
 

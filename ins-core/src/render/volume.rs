@@ -181,7 +181,7 @@ mod tests {
             min_t,
         )
         .into_data()
-        .to_vec::<f32>()
+        .try_to_vec::<f32>()
         .unwrap();
         let mut want = vec![0f32; r * w];
         for k in kept {
