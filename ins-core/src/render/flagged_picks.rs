@@ -18,10 +18,10 @@ const OFFSET_STEPS: i64 = 1024;
 
 /// `k` picks among the entries of `flags [N]` that are 1 (the others 0): their indices `[k]`
 /// and weights `[k]`, 1 for a pick and 0 for a filler (index 0) when fewer than `k` are
-/// flagged. With `T ≥ k` flagged, stratum `i` holds the ranks from `⌊i·T/k⌋` up to
-/// `⌊(i+1)·T/k⌋` and pick `i` takes the flagged entry at `uᵢ/1024` of the way through it, `uᵢ`
-/// drawn by `seed`: one pick per stratum, in order. The ranks are split as `i·⌊T/k⌋ +
-/// ⌊i·(T mod k)/k⌋`, so that no product outgrows 32-bit integers (the device's) for any `N`.
+/// flagged. With `T ≥ k` flagged, pick `i` takes rank `⌊(i·T + ⌊uᵢ·T/1024⌋)/k⌋`, `uᵢ` drawn in
+/// `[0, 1024)` by `seed`: one pick in each of `k` equal strata of the ranks, in order. Each
+/// product is split (`⌊a·T/b⌋ = a·⌊T/b⌋ + ⌊a·(T mod b)/b⌋`) so that none outgrows 32-bit
+/// integers (the device's) for any `N`.
 pub fn pick_flagged(flags: Tensor<1>, k: usize, seed: u64) -> (Tensor<1, Int>, Tensor<1>) {
     let [n] = flags.dims();
     assert!(
@@ -39,18 +39,19 @@ pub fn pick_flagged(flags: Tensor<1>, k: usize, seed: u64) -> (Tensor<1, Int>, T
     let entries = Tensor::<1, Int>::arange(0..n as i64, &device) * flagged;
     let table =
         Tensor::<1, Int>::zeros([n + 1], &device).scatter(0, slot, entries, IndexingUpdateOp::Add);
-    // Where stratum i starts, ⌊i·T/k⌋, for i = 0 ..= k.
-    let share = total.clone().div_scalar(k as i64); // ⌊T/k⌋
-    let rest = total.clone().remainder_scalar(k as i64); // T mod k
-    let start =
-        |i: Tensor<1, Int>| i.clone() * share.clone() + (i * rest.clone()).div_scalar(k as i64);
-    let i = Tensor::<1, Int>::arange(0..k as i64, &device);
-    let first = start(i.clone());
-    let width = start(i.clone().add_scalar(1)) - first.clone();
+    // ⌊a·T/b⌋ for a < b, without forming a·T.
+    let scaled = |a: Tensor<1, Int>, b: i64| {
+        a.clone() * total.clone().div_scalar(b)
+            + (a * total.clone().remainder_scalar(b)).div_scalar(b)
+    };
     let mut rng = SmallRng::seed_from_u64(seed);
     let u: Vec<i64> = (0..k).map(|_| rng.random_range(0..OFFSET_STEPS)).collect();
     let u = Tensor::<1, Int>::from_data(TensorData::new(u, [k]), &device);
-    let strata = first + (u * width).div_scalar(OFFSET_STEPS);
+    let i = Tensor::<1, Int>::arange(0..k as i64, &device);
+    // ⌊(i·T + o)/k⌋ = i·⌊T/k⌋ + ⌊(i·(T mod k) + o)/k⌋, with o = ⌊u·T/1024⌋ < T.
+    let offset = scaled(u, OFFSET_STEPS);
+    let strata = i.clone() * total.clone().div_scalar(k as i64)
+        + (i.clone() * total.clone().remainder_scalar(k as i64) + offset).div_scalar(k as i64);
     let rank = i
         .clone()
         .mask_where(total.clone().greater_equal_elem(k as i64), strata)
@@ -111,6 +112,12 @@ mod tests {
             );
         }
         assert!(index.windows(2).all(|w| w[0] <= w[1]));
+        // The split products give the direct formula's ranks exactly.
+        let mut rng = SmallRng::seed_from_u64(11);
+        for (i, &j) in index.iter().enumerate() {
+            let u = rng.random_range(0..OFFSET_STEPS) as usize;
+            assert_eq!(j, ranked[(i * t + u * t / 1024) / k], "pick {i}");
+        }
         assert_ne!(pick(&flags, k, 12).0, index);
     }
 }
