@@ -10,8 +10,11 @@
 //!
 //! Not a model parameter: the best constant has a closed form per batch,
 //! `Σ Tᵢ (targetᵢ − fieldᵢ) / Σ Tᵢ²` (`T` the ray's transmittance, `field` its colour without
-//! background), kept as running sums so that a resumed run continues exactly.
+//! background), kept as running sums so that a resumed run continues exactly. While training
+//! the sums stay on the device ([`BackgroundFit`]): reading four numbers back every step made
+//! a GPU wait for the host at every step; they are read only for a picture or a checkpoint.
 
+use burn::prelude::*;
 use ins_scene::data::{Scene, SceneFormat};
 
 /// Whether `scene` learns its background: an object-centred capture (COLMAP, transforms.json)
@@ -68,6 +71,82 @@ impl LearnedBackground {
     }
 }
 
+/// [`LearnedBackground`]'s sums and colour kept on the device while pretraining: the same
+/// arithmetic in the same order, without a read-back per step.
+#[derive(Debug, Clone)]
+pub struct BackgroundFit {
+    /// Decayed `Σ T (target − field)`, `[3]`.
+    num: Tensor<1>,
+    /// Decayed `Σ T²`, `[1]`.
+    den: Tensor<1>,
+    /// The colour the sums give, the previous one while they are empty, `[3]`.
+    colour: Tensor<1>,
+}
+
+impl BackgroundFit {
+    /// Continues from `sums`, showing `fallback` until they give a colour.
+    pub fn new(sums: LearnedBackground, fallback: [f32; 3], device: &Device) -> Self {
+        Self {
+            num: Tensor::from_floats(sums.num, device),
+            den: Tensor::from_floats([sums.den], device),
+            colour: Tensor::from_floats(sums.colour(fallback), device),
+        }
+    }
+
+    /// Composites `field` `[R, 3]` (rendered over black, the rays letting `1 − opacity`
+    /// through, `opacity` `[R]`) over the current colour, then adds the batch's sums against
+    /// `target` `[R, 3]`. The gradient reaches the field and its opacity; the colour is a
+    /// constant of the step. A batch whose sums are not finite leaves the fit as it was.
+    pub fn composite_and_fit(
+        &mut self,
+        field: Tensor<2>,
+        opacity: Tensor<1>,
+        target: Tensor<2>,
+    ) -> Tensor<2> {
+        let [r, _] = field.dims();
+        let rest = opacity.neg().add_scalar(1.0).reshape([r, 1]);
+        let pred = field.clone() + rest.clone() * self.colour.clone().reshape([1, 3]);
+        let through = rest.detach();
+        let residual = target - field.detach();
+        let num = (through.clone() * residual).sum_dim(0).reshape([3]);
+        let den = (through.clone() * through).sum().reshape([1]);
+        let total = num.clone().sum() + den.clone();
+        let finite = total
+            .clone()
+            .is_nan()
+            .bool_not()
+            .bool_and(total.is_inf().bool_not());
+        let decayed = |old: Tensor<1>, add: Tensor<1>| {
+            let n = old.dims()[0];
+            let keep = finite.clone().expand([n]);
+            old.clone().mask_where(keep, old.mul_scalar(DECAY) + add)
+        };
+        self.num = decayed(self.num.clone(), num);
+        self.den = decayed(self.den.clone(), den);
+        let has_light = self.den.clone().greater_elem(1e-6).expand([3]);
+        let fitted = (self.num.clone() / self.den.clone().expand([3])).clamp(0.0, 1.0);
+        self.colour = self.colour.clone().mask_where(has_light, fitted);
+        pred
+    }
+
+    /// The sums and colour, read back (one transfer).
+    pub fn read(&self) -> (LearnedBackground, [f32; 3]) {
+        let v = Tensor::cat(
+            vec![self.num.clone(), self.den.clone(), self.colour.clone()],
+            0,
+        )
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .unwrap_or_else(|_| vec![0.0; 7]);
+        let sums = LearnedBackground {
+            num: [v[0], v[1], v[2]],
+            den: v[3],
+        };
+        (sums, [v[4], v[5], v[6]])
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,5 +175,52 @@ mod tests {
         for (a, b) in before.iter().zip(after) {
             assert!((a - b).abs() < 1e-6);
         }
+    }
+
+    /// The device fit gives the host's sums and colours step by step, ignores a NaN batch,
+    /// and composites with the colour of the steps before.
+    #[test]
+    fn the_device_fit_follows_the_host_sums() {
+        let device = Device::flex();
+        let mut host = LearnedBackground::default();
+        let mut fit = BackgroundFit::new(host, [0.0; 3], &device);
+        let rgb = |v: &[f32]| Tensor::<1>::from_floats(v, &device).reshape([v.len() / 3, 3]);
+        let mut colour = [0.0f32; 3];
+        for step in 0..6 {
+            let s = step as f32;
+            let field = [0.1, 0.2, 0.3, 0.05 * s, 0.0, 0.4];
+            let opacity = [0.5, 0.25 + 0.1 * s];
+            let target = [0.4, 0.5, 0.9, 0.7, 0.1 * s, 0.6];
+            let target = if step == 3 { [f32::NAN; 6] } else { target };
+            let pred = fit.composite_and_fit(
+                rgb(&field),
+                Tensor::from_floats(opacity, &device),
+                rgb(&target),
+            );
+            let pred = pred.into_data().try_to_vec::<f32>().unwrap();
+            let mut num = [0.0f32; 3];
+            let mut den = 0.0f32;
+            for ray in 0..2 {
+                let t = 1.0 - opacity[ray];
+                for c in 0..3 {
+                    let want = field[3 * ray + c] + t * colour[c];
+                    assert!((pred[3 * ray + c] - want).abs() < 1e-6, "step {step}");
+                    num[c] += t * (target[3 * ray + c] - field[3 * ray + c]);
+                }
+                den += t * t;
+            }
+            host.update(num, den);
+            colour = host.colour(colour);
+            let (sums, got) = fit.read();
+            for c in 0..3 {
+                assert!((sums.num[c] - host.num[c]).abs() < 1e-5, "step {step}");
+                assert!(
+                    (got[c] - colour[c]).abs() < 1e-5,
+                    "step {step}: {got:?} vs {colour:?}"
+                );
+            }
+            assert!((sums.den - host.den).abs() < 1e-5);
+        }
+        assert!(colour.iter().any(|&c| c > 0.1), "the fit moved: {colour:?}");
     }
 }

@@ -265,7 +265,7 @@ impl Variant for Nerf {
             &shown,
             render_sampling(cfg, task.grid.as_ref()),
             code,
-            task.background,
+            task.background(),
             device,
         )?;
         let pictures: Vec<RgbImage> = evals.iter().map(|e| e.picture(&task.scene)).collect();

@@ -19,7 +19,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::background::{LearnedBackground, fixed_background, learns_background};
+use super::background::{BackgroundFit, LearnedBackground, fixed_background, learns_background};
 use super::deferred::PatchRender;
 use super::early_stop::INVISIBLE_TRANSMITTANCE;
 use super::eval::{evaluate_views, save_eval_picture};
@@ -111,10 +111,13 @@ pub struct NerfTask {
     /// Evaluation schedule.
     pub eval: EvalSchedule,
     /// Background colour: white for alpha-composited photos, black for datasets and contracted
-    /// captures; an object capture in a box learns its own (see [`LearnedBackground`]).
-    pub background: [f32; 3],
-    /// The learned background's running sums (object captures in a box).
-    learned_background: Option<LearnedBackground>,
+    /// captures; an object capture in a box learns its own (see [`LearnedBackground`]), and
+    /// this is then its colour as last read from the device.
+    background: [f32; 3],
+    /// The learned background's fit, on the device (object captures in a box).
+    learned_background: Option<BackgroundFit>,
+    /// Whether the fit moved since `background` was read from it.
+    background_unread: bool,
     /// Pretraining step (in its phase) after which the training photos are audited
     /// ([`view_audit`](super::view_audit)); `None`: never.
     audit_at: Option<usize>,
@@ -143,7 +146,8 @@ impl NerfTask {
         device: &Device,
     ) -> Self {
         let background = fixed_background(&scene);
-        let learned_background = learns_background(&scene).then(LearnedBackground::default);
+        let learned_background = learns_background(&scene)
+            .then(|| BackgroundFit::new(LearnedBackground::default(), background, device));
         Self {
             scene,
             sampler,
@@ -153,6 +157,7 @@ impl NerfTask {
             eval,
             background,
             learned_background,
+            background_unread: false,
             audit_at: None,
             dropped_views: Vec::new(),
             device: device.clone(),
@@ -180,7 +185,8 @@ impl NerfTask {
     fn adopt(&mut self, state: &NerfState) {
         if let Some(b) = state.background {
             self.background = b.colour(self.background);
-            self.learned_background = Some(b);
+            self.learned_background = Some(BackgroundFit::new(b, self.background, &self.device));
+            self.background_unread = false;
         }
         self.drop_views(&state.dropped_views);
     }
@@ -197,6 +203,7 @@ impl NerfTask {
     /// Scores every training photo against the field and leaves out those posed wrongly,
     /// naming them. Returns how many were dropped.
     fn audit_views(&mut self, model: &NerfModel, seed: u64) -> Result<usize> {
+        let background = self.background_read();
         let model = model.valid();
         let device = self.device.clone().inner();
         let fits = super::view_audit::fit_views(
@@ -204,7 +211,7 @@ impl NerfTask {
             &self.scene,
             &self.scene.train,
             self.sampling(),
-            self.background,
+            background,
             seed,
             &device,
         )?;
@@ -233,32 +240,20 @@ impl NerfTask {
         Ok(views.len())
     }
 
-    /// Fits the learned background to a batch (see [`LearnedBackground`]): `pred` rendered over
-    /// `self.background` with `opacity`, against `target`, `[R, 3]` and `[R]`.
-    fn fit_background(&mut self, pred: &Tensor<2>, opacity: &Tensor<1>, target: &Tensor<2>) {
-        let Some(learned) = self.learned_background.as_mut() else {
-            return;
-        };
-        let r = target.dims()[0];
-        let through = opacity
-            .clone()
-            .detach()
-            .neg()
-            .add_scalar(1.0)
-            .reshape([r, 1]);
-        let bg = Tensor::<1>::from_floats(self.background, &self.device).reshape([1, 3]);
-        // target − field colour, the field's colour being the render less its background.
-        let residual = target.clone() - pred.clone().detach() + through.clone() * bg;
-        let num = (through.clone() * residual).sum_dim(0).reshape([3]);
-        let den = (through.clone() * through).sum().reshape([1]);
-        let Ok(sums) = Tensor::cat(vec![num, den], 0)
-            .into_data()
-            .try_to_vec::<f32>()
-        else {
-            return;
-        };
-        learned.update([sums[0], sums[1], sums[2]], sums[3]);
-        self.background = learned.colour(self.background);
+    /// The background colour now: a learned one is read from the device if it moved since
+    /// (pictures, checkpoints and stylizing read it, a pretraining step does not).
+    pub fn background(&self) -> [f32; 3] {
+        match &self.learned_background {
+            Some(fit) if self.background_unread => fit.read().1,
+            _ => self.background,
+        }
+    }
+
+    /// [`background`](Self::background), remembered until the fit moves again.
+    fn background_read(&mut self) -> [f32; 3] {
+        self.background = self.background();
+        self.background_unread = false;
+        self.background
     }
 
     /// The sampling for this step's render.
@@ -334,20 +329,33 @@ impl NerfTask {
                 .reshape([r, 1]);
             (out.fine.rgb.clone() + rest * bg, target, out)
         } else {
+            // A learned background is composited here, over the field rendered on black.
+            let background = match self.learned_background {
+                Some(_) => [0.0; 3],
+                None => self.background,
+            };
             let out = render(
                 model,
                 &rays,
                 self.sampling(),
                 None,
-                self.background,
+                background,
                 Some(seed),
                 &self.device,
             );
-            (out.fine.rgb.clone(), target, out)
+            let pred = match self.learned_background.as_mut() {
+                Some(fit) => {
+                    self.background_unread = true;
+                    fit.composite_and_fit(
+                        out.fine.rgb.clone(),
+                        out.fine.opacity.clone(),
+                        target.clone(),
+                    )
+                }
+                None => out.fine.rgb.clone(),
+            };
+            (pred, target, out)
         };
-        if !random_background {
-            self.fit_background(&pred, &out.fine.opacity, &target);
-        }
         self.last_samples = out.samples;
         self.last_rays = r;
         let mut terms = LossTerms::default()
@@ -372,6 +380,11 @@ impl NerfTask {
             .as_ref()
             .context("a stylization phase without styles")?;
         let spec = style.patch;
+        let background = self.background_read();
+        let style = self
+            .style
+            .as_ref()
+            .context("a stylization phase without styles")?;
         let mut sampler = PatchSampler::new(spec.size, spec.stride, seed);
         let patch = sampler.sample(&self.scene, Split::Train)?;
         let k = spec.size as usize;
@@ -387,7 +400,7 @@ impl NerfTask {
                 rays: &rays,
                 sampling: self.sampling(),
                 codes: &perceptual.codes,
-                background: self.background,
+                background,
                 seed,
                 chunk: style.backprop_chunk,
             };
@@ -429,7 +442,7 @@ impl NerfTask {
             &rays,
             self.sampling(),
             Some(perceptual.codes.clone()),
-            self.background,
+            background,
             Some(seed),
             &self.device,
         );
@@ -502,7 +515,7 @@ impl NerfTask {
             &self.eval.views,
             self.sampling(),
             first_code,
-            self.background,
+            self.background(),
             &device,
         )?;
         let pictures: Vec<RgbImage> = views.iter().map(|v| v.picture(&self.scene)).collect();
@@ -581,7 +594,7 @@ impl Task for NerfTask {
         Ok(Some(super::state_io::encode(&NerfState {
             samples_per_ray: self.samples_per_ray,
             grid: self.grid.clone(),
-            background: self.learned_background,
+            background: self.learned_background.as_ref().map(|fit| fit.read().0),
             dropped_views: self.dropped_views.clone(),
         })))
     }

@@ -402,6 +402,55 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
     assert_eq!(wgpu, flex, "the picks differ from the host's");
 }
 
+/// A capture's learned background, fitted on the device without a read-back, follows flex's
+/// fit on wgpu, a batch with a NaN left out.
+#[test]
+fn a_learned_background_is_fitted_on_wgpu_as_on_the_host() {
+    use ins_models::nerf::background::{BackgroundFit, LearnedBackground};
+    let on = |device: &Device| -> Vec<f32> {
+        let mut fit = BackgroundFit::new(LearnedBackground::default(), [0.0; 3], device);
+        let mut out = Vec::new();
+        for step in 0..4 {
+            let rows =
+                |v: Vec<f32>| Tensor::<1>::from_floats(v.as_slice(), device).reshape([64, 3]);
+            let field: Vec<f32> = (0..192)
+                .map(|i| ((i * 7 + step) % 13) as f32 / 26.0)
+                .collect();
+            let mut target: Vec<f32> = (0..192)
+                .map(|i| ((i * 5 + step) % 11) as f32 / 11.0)
+                .collect();
+            if step == 2 {
+                target[17] = f32::NAN;
+            }
+            let opacity: Vec<f32> = (0..64)
+                .map(|i| ((i * 3 + step) % 10) as f32 / 10.0)
+                .collect();
+            let pred = fit.composite_and_fit(
+                rows(field),
+                Tensor::from_floats(opacity.as_slice(), device),
+                rows(target),
+            );
+            out.extend(values(pred.reshape([192])));
+            let (sums, colour) = fit.read();
+            out.extend(sums.num);
+            out.push(sums.den);
+            out.extend(colour);
+        }
+        out
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "fitting a background", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    assert_eq!(flex.len(), wgpu.len());
+    for (i, (a, b)) in flex.iter().zip(&wgpu).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-5 * (1.0 + a.abs()),
+            "value {i}: flex {a}, wgpu {b}"
+        );
+    }
+}
+
 #[test]
 fn an_idr_stylization_step_has_the_same_loss_and_gradients_on_wgpu() {
     let dir = tempfile::tempdir().unwrap();
