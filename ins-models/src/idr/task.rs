@@ -8,7 +8,7 @@ use burn::prelude::*;
 use ins_core::loss::{PerceptualLoss, patch_images, photo_patch, psnr};
 use ins_core::render::sphere_tracing::TraceOptions;
 use ins_core::shape_buckets::{pad_rows, padded_size, sum_counted};
-use ins_core::train::{LossTerms, StepContext, Task};
+use ins_core::train::{LossTerms, Probe, StepContext, Task};
 use ins_scene::data::{Scene, Split};
 use ins_scene::mask_sampler::MaskedPixels;
 use ins_scene::patches::{PatchSampler, PatchSpec};
@@ -214,7 +214,12 @@ impl IdrTask {
             .term("mse_mask", mse_in)
             .metric_of("psnr_mask", "mse_mask", psnr);
         if let Some(sharp) = &model.sharpness {
-            terms = terms.metric("sharpness", sharp.value() as f64);
+            // Read with the terms, not on its own: a read of its own would make a GPU wait.
+            terms = terms.probe(Probe {
+                name: "sharpness",
+                value: sharp.s().detach(),
+                watch: None,
+            });
         }
         if self.masked {
             let gt = Tensor::<1>::from_floats(inside.as_slice(), &self.device);
