@@ -6,12 +6,7 @@
 DEADLINE=${DEADLINE:-560}
 source scripts/gpu/lib.sh
 unpack ins-cli; BIN=/tmp/ins-cli
-read -r bpk onnx size mtime < .dev/vgg.meta
-mkdir -p "$(dirname "$onnx")"
-python3 -c "import lzma,shutil; shutil.copyfileobj(lzma.open('.dev/vgg.bpk.xz'), open('$(dirname "$onnx")/$bpk','wb'))"
-cp .dev/"${bpk%.bpk}".json "$(dirname "$onnx")/"
-truncate -s "$size" "$onnx"; touch -d "${mtime//_/ }" "$onnx"
-export INS_CACHE_DIR=$(dirname "$(dirname "$onnx")")
+restore_vgg
 R=runs/$(date +%s); mkdir -p "$R"
 metrics() { cut -c1-240 "$1/metrics.jsonl" 2>/dev/null | tail -"$2"; }
 cuda_env

@@ -42,3 +42,12 @@ cuda_env() { # CUDA_PATH and the library path for --backend cuda: NVRTC compiles
   fi
   stamp "CUDA_PATH=$CUDA_PATH cuda_runtime.h: $(ls "$CUDA_PATH"/include/cuda_runtime.h 2>&1 | head -1); nvrtc: $(ldconfig -p | grep -c nvrtc) in ldconfig, $(find ${LD_LIBRARY_PATH//:/ } -maxdepth 1 -name 'libnvrtc*' 2>/dev/null | head -3 | tr '\n' ' ')"
 }
+restore_vgg() { # the converted VGG-16 weights where the binary looks for them (pack.sh's .dev/vgg.*)
+  [ -f .dev/vgg.meta ] || { stamp "no VGG-16 weights packed (VGG=0): stylizing stages will stop"; return; }
+  read -r bpk onnx size mtime < .dev/vgg.meta
+  mkdir -p "$(dirname "$onnx")"
+  python3 -c "import lzma,shutil; shutil.copyfileobj(lzma.open('.dev/vgg.bpk.xz'), open('$(dirname "$onnx")/$bpk','wb'))"
+  cp .dev/"${bpk%.bpk}".json "$(dirname "$onnx")/"
+  truncate -s "$size" "$onnx"; touch -d "${mtime//_/ }" "$onnx"
+  export INS_CACHE_DIR=$(dirname "$(dirname "$onnx")")
+}

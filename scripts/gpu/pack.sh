@@ -5,9 +5,10 @@
 # 200² (every 4th val view), a painting, PyTorch's benchmark program, and Vulkan's loader and
 # libglvnd as .deb files in .gl/ (NVIDIA's Vulkan driver needs libGLdispatch).
 # Run from the repository root after `cargo build --release -p ins-cli` and `ins-cli vgg fetch`.
-# PYTHON must have Pillow (for the 200² lego). For profile.sh: SPIRV_BIN names a binary built
-# with `--features spirv` (packed as ins-cli-spirv.xz), and VGG=0 leaves the weights out (two
-# binaries and VGG do not fit the 64 MiB together).
+# PYTHON must have Pillow (for the 200² lego). For profile.sh's SPIR-V stage: SPIRV_BIN names a
+# binary built with `--features spirv` (packed as ins-cli-spirv.xz), and VGG=0 leaves the weights
+# out (two binaries and VGG do not fit the 64 MiB together; profile.sh's IDR stylization then
+# stops at its start).
 set -euo pipefail
 SHARED=${SHARED:-../shared}
 PYTHON=${PYTHON:-python3}

@@ -1,23 +1,48 @@
 #!/bin/bash
-# Where a wgpu step's time goes on a GPU (issue 28), kernel by kernel, and whether compiling
-# kernels to SPIR-V instead of WGSL changes it. Run on the device machine from the repository
-# root with .dev and .gl carried: .dev holds ins-cli.xz (the default build), ins-cli-spirv.xz
-# (`--features spirv`) and lego200 (scripts/gpu/pack.sh). Each stage under its own timeout, all
-# under DEADLINE seconds; summaries go to $OUT.
-DEADLINE=${DEADLINE:-240}
+# Where a GPU step's time goes (issue 48), for the second call of a GPU session after check.sh.
+# Run on the device machine from the repository root with .dev and .gl carried (pack.sh).
+# - Kernel by kernel (CubeCL's profile, summed by profile_summary.py): VGG, the largest gap to
+#   PyTorch (siren's step is mostly VGG), on wgpu and on CUDA; a grid NeRF step on CUDA.
+# - Sphere tracing's share: an IDR stylization traces its patch's rays against the frozen
+#   surface every step (off a CPU its rounds on the device, four reads a trace); its metrics
+#   log the tracing's wall time (`trace_ms`) beside the step's (`ms`).
+# - SPIR-V instead of WGSL, where pack.sh packed a `--features spirv` binary (SPIRV_BIN).
+# Each stage under its own timeout, all under DEADLINE seconds; summaries go to $OUT.
+DEADLINE=${DEADLINE:-300}
 source scripts/gpu/lib.sh
-unpack ins-cli; unpack ins-cli-spirv
-WGSL=/tmp/ins-cli; SPIRV=/tmp/ins-cli-spirv
+unpack ins-cli; BIN=/tmp/ins-cli
+restore_vgg
+cuda_env
 profiled() { # profiled NAME TIMEOUT args...: the run with CubeCL's kernel profile, summarized
   local name=$1 to=$2; shift 2
   stage "$name" "$to" env CUBECL_DEBUG_LOG=/tmp/$name.log CUBECL_DEBUG_OPTION=profile "$@"
   python3 scripts/gpu/profile_summary.py /tmp/$name.log > "$OUT/$name.txt" 2>&1
   head -18 "$OUT/$name.txt"
 }
+step_times() { # step_times RUN: median ms a step and median trace_ms over the run's logged steps
+  python3 - "$1/metrics.jsonl" <<'PY'
+import json, statistics, sys
+rows = [json.loads(l) for l in open(sys.argv[1]) if '"ms"' in l]
+for key in ("ms", "trace_ms"):
+    v = [r[key] for r in rows[len(rows) // 4:] if key in r]
+    if v:
+        print(f"{key}: median {statistics.median(v):.1f} over {len(v)} steps")
+PY
+}
 stamp "setup done"
-profiled prof_nerf_grid 70 $WGSL bench --backend wgpu --steps 2 nerf-grid
-stage wgsl_hash 30 $WGSL bench --backend wgpu --steps 3 hash-grid-object hash-grid
-stage spirv_bench 70 $SPIRV bench --backend wgpu --steps 3 hash-grid-object nerf-grid
-profiled prof_lego 90 $WGSL train nerf --scene .dev/lego200 --steps 70 --eval-every 0 --quiet --backend wgpu --out runs/prof_lego
-cut -c1-200 runs/prof_lego/metrics.jsonl 2>/dev/null | tail -3
+profiled prof_vgg_wgpu 60 $BIN bench --backend wgpu --steps 2 vgg
+profiled prof_vgg_cuda 60 $BIN bench --backend cuda --steps 2 vgg
+profiled prof_nerf_grid_cuda 60 $BIN bench --backend cuda --steps 2 nerf-grid
+stage synth 20 $BIN data synth --format dtu --out /tmp/dtu --size 128 --views 16
+for backend in cuda wgpu; do
+  stage idr_pretrain_$backend 60 $BIN train idr --scene /tmp/dtu --steps 300 --eval-every 0 \
+    --out runs/idr_$backend --quiet --backend $backend
+  stage idr_stylize_$backend 60 $BIN train idr --from runs/idr_$backend --style .dev/starry_night.jpg \
+    --steps 60 --out runs/idr_st_$backend --quiet --backend $backend
+  step_times runs/idr_st_$backend
+done
+if [ -f .dev/ins-cli-spirv.xz ]; then
+  unpack ins-cli-spirv
+  stage spirv_bench 70 /tmp/ins-cli-spirv bench --backend wgpu --steps 3 hash-grid-object nerf-grid vgg
+fi
 stamp "all done"

@@ -64,17 +64,17 @@ pub struct Traced {
 
 /// A sign change along ray `ray`: `f(t0) ≥ 0 > f(t1)`.
 #[derive(Debug, Clone, Copy)]
-struct Bracket {
-    ray: usize,
-    t0: f32,
-    f0: f32,
-    t1: f32,
-    f1: f32,
+pub(super) struct Bracket {
+    pub(super) ray: usize,
+    pub(super) t0: f32,
+    pub(super) f0: f32,
+    pub(super) t1: f32,
+    pub(super) f1: f32,
 }
 
 impl Bracket {
     /// The secant estimate of the crossing, inside the bracket.
-    fn secant(&self) -> f32 {
+    pub(super) fn secant(&self) -> f32 {
         let d = self.f1 - self.f0;
         if d.abs() > 1e-12 {
             (self.t0 - self.f0 * (self.t1 - self.t0) / d).clamp(self.t0, self.t1)
@@ -100,23 +100,23 @@ impl Stretch {
 }
 
 /// The closest sample of each ray so far.
-struct Closest {
-    t: Vec<f32>,
-    f: Vec<f32>,
+pub(super) struct Closest {
+    pub(super) t: Vec<f32>,
+    pub(super) f: Vec<f32>,
 }
 
 /// The march sample of a ray with the smallest value, with the samples before and after it.
 #[derive(Clone, Copy)]
-struct MarchMinimum {
-    before: (f32, f32),
-    at: (f32, f32),
-    after: (f32, f32),
+pub(super) struct MarchMinimum {
+    pub(super) before: (f32, f32),
+    pub(super) at: (f32, f32),
+    pub(super) after: (f32, f32),
 }
 
 impl MarchMinimum {
-    const NONE: (f32, f32) = (f32::NAN, f32::NAN);
+    pub(super) const NONE: (f32, f32) = (f32::NAN, f32::NAN);
     /// Before the first sample.
-    const EMPTY: Self = Self {
+    pub(super) const EMPTY: Self = Self {
         before: Self::NONE,
         at: Self::NONE,
         after: Self::NONE,
@@ -213,6 +213,30 @@ pub fn sphere_trace(
     opts: &TraceOptions,
     mut sdf: impl FnMut(&[f32]) -> Vec<f32>,
 ) -> Traced {
+    let mut m = march(rays, opts, &mut sdf);
+    let clear = search_the_rest(rays, opts, &mut m, &mut sdf);
+    refine_by_secant(rays, opts, &mut m.brackets, &mut sdf);
+    conclude(m, &clear)
+}
+
+/// What the march (step 1) leaves for the search and the secant.
+pub(super) struct Marched {
+    /// Where each ray's march stopped.
+    pub(super) t: Vec<f32>,
+    /// Rays that converged.
+    pub(super) hit: Vec<bool>,
+    /// Each ray's closest sample.
+    pub(super) closest: Closest,
+    /// Sign changes the march stepped over.
+    pub(super) brackets: Vec<Bracket>,
+    /// Rays that left their interval.
+    pub(super) exited: Vec<bool>,
+    /// Each ray's smallest march sample with its neighbours.
+    pub(super) march_min: Vec<MarchMinimum>,
+}
+
+/// Step 1, sphere tracing from the near end: the rays still marching are evaluated each round.
+fn march(rays: &Rays, opts: &TraceOptions, sdf: &mut impl FnMut(&[f32]) -> Vec<f32>) -> Marched {
     let n = rays.len();
     let mut t = rays.near.clone();
     let mut hit = vec![false; n];
@@ -228,7 +252,6 @@ pub fn sphere_trace(
     let mut march_min = vec![MarchMinimum::EMPTY; n];
     let mut active: Vec<usize> = (0..n).filter(|&i| rays.far[i] > rays.near[i]).collect();
     let mut points = Vec::new();
-    // 1. Sphere tracing from the near end.
     for _ in 0..opts.max_steps {
         if active.is_empty() {
             break;
@@ -273,19 +296,37 @@ pub fn sphere_trace(
         }
         active = still;
     }
-    // 2. Sampling for every ray that has neither converged nor been bracketed.
+    Marched {
+        t,
+        hit,
+        closest,
+        brackets,
+        exited,
+        march_min,
+    }
+}
+
+/// Step 2, sampling every ray that has neither converged nor been bracketed: the sign changes
+/// found join `m.brackets`. Returns the clear misses.
+pub(super) fn search_the_rest(
+    rays: &Rays,
+    opts: &TraceOptions,
+    m: &mut Marched,
+    sdf: &mut impl FnMut(&[f32]) -> Vec<f32>,
+) -> Vec<bool> {
+    let n = rays.len();
     let bracketed: Vec<bool> = {
         let mut b = vec![false; n];
-        for br in &brackets {
+        for br in &m.brackets {
             b[br.ray] = true;
         }
         b
     };
     let clear: Vec<bool> = (0..n)
-        .map(|i| exited[i] && closest.f[i] > opts.clear_miss)
+        .map(|i| m.exited[i] && m.closest.f[i] > opts.clear_miss)
         .collect();
     let stretches: Vec<Stretch> = (0..n)
-        .filter(|&i| !hit[i] && !bracketed[i] && rays.far[i] > rays.near[i])
+        .filter(|&i| !m.hit[i] && !bracketed[i] && rays.far[i] > rays.near[i])
         .map(|i| Stretch {
             ray: i,
             t0: rays.near[i],
@@ -298,8 +339,8 @@ pub fn sphere_trace(
         })
         .filter(|s| s.count >= 2)
         .collect();
-    let (found, open) = search(rays, &stretches, &mut closest, &mut sdf);
-    brackets.extend(found);
+    let (found, open) = search(rays, &stretches, &mut m.closest, sdf);
+    m.brackets.extend(found);
     // A finer look around the closest sample of each fully searched ray without a crossing.
     if opts.refine_samples >= 2 {
         let windows: Vec<Stretch> = open
@@ -316,10 +357,20 @@ pub fn sphere_trace(
                 }
             })
             .collect();
-        let (found, _) = search(rays, &windows, &mut closest, &mut sdf);
-        brackets.extend(found);
+        let (found, _) = search(rays, &windows, &mut m.closest, sdf);
+        m.brackets.extend(found);
     }
-    // 3. Secant refinement of each sign change, all brackets at once.
+    clear
+}
+
+/// Step 3, secant refinement of each sign change, all brackets at once.
+fn refine_by_secant(
+    rays: &Rays,
+    opts: &TraceOptions,
+    brackets: &mut [Bracket],
+    sdf: &mut impl FnMut(&[f32]) -> Vec<f32>,
+) {
+    let mut points = Vec::new();
     for _ in 0..opts.secant_steps {
         if brackets.is_empty() {
             break;
@@ -340,13 +391,25 @@ pub fn sphere_trace(
             }
         }
     }
+}
+
+/// The hits (each bracket's secant estimate) and the misses' closest approaches.
+pub(super) fn conclude(m: Marched, clear: &[bool]) -> Traced {
+    let Marched {
+        mut t,
+        mut hit,
+        mut closest,
+        brackets,
+        march_min,
+        ..
+    } = m;
     for b in &brackets {
         t[b.ray] = b.secant();
         hit[b.ray] = true;
     }
     // A clear miss's closest approach: its march samples are about as far apart as the ray is
     // from the surface there, and the parabola through them finds the minimum between them.
-    for i in 0..n {
+    for i in 0..t.len() {
         if clear[i] && !hit[i] && march_min[i].at.1 <= closest.f[i] {
             closest.t[i] = march_min[i].vertex();
         }

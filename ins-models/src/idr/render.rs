@@ -3,8 +3,10 @@
 //! so colour gradients reach the SDF; shade with the normal ∇f(x(θ)) under every style.
 
 use burn::prelude::*;
+use ins_core::kernels::flex::is_flex;
 use ins_core::render::gather::select_parallel;
 use ins_core::render::sphere_tracing::{TraceOptions, Traced, sphere_trace};
+use ins_core::render::sphere_tracing_device::sphere_trace_on_device;
 use ins_core::shape_buckets::{pad_rows, padded_size};
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{Rays, flatten};
@@ -40,11 +42,17 @@ pub fn sdf_at(sdf: &SdfNet, points: &[f32], device: &Device) -> Vec<f32> {
     out
 }
 
-/// Traces rays against the model's current SDF (on the inner device, no gradient).
+/// Traces rays against the model's current SDF (on the inner device, no gradient): on a CPU
+/// by the host's tracer, which evaluates only the rays still marching; elsewhere with its
+/// rounds on the device, four reads a trace instead of one a round.
 pub fn trace(model: &IdrModel, rays: &Rays, opts: &TraceOptions, device: &Device) -> Traced {
     let sdf = model.sdf.valid();
     let inner = device.clone().inner();
-    sphere_trace(rays, opts, |p| sdf_at(&sdf, p, &inner))
+    if is_flex(&inner) {
+        sphere_trace(rays, opts, |p| sdf_at(&sdf, p, &inner))
+    } else {
+        sphere_trace_on_device(rays, opts, |x| sdf.sdf(x), &inner)
+    }
 }
 
 /// IDR's differentiable surface point: `x(θ) = x₀ − v · f(x₀; θ) / (∇f(x₀) · v)` with `x₀`

@@ -402,6 +402,66 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
     assert_eq!(wgpu, flex, "the picks differ from the host's");
 }
 
+/// IDR's tracer with its rounds on the device (the GPU path) finds on wgpu the hits, depths and
+/// closest approaches the host's tracer finds: a box (faces, edges) whose field overstates
+/// distances, so the march brackets some rays and the search finds others; near and clear
+/// misses.
+#[test]
+fn surfaces_are_traced_on_wgpu_as_on_the_host() {
+    use ins_core::render::sphere_tracing::{TraceOptions, sphere_trace};
+    use ins_core::render::sphere_tracing_device::sphere_trace_on_device;
+    use ins_scene::geometry::Vec3;
+    use ins_scene::rays::Rays;
+    let mut rays = Rays::default();
+    for i in 0..40 {
+        let y = -0.5 + 1.0 * i as f32 / 39.0;
+        let dir = Vec3::new(0.1, 0.0, -1.0).normalize();
+        rays.push(Vec3::new(-0.1, y, 2.0), dir, 0.5, 3.5);
+    }
+    for k in [1.0f32, 1.5, 8.0] {
+        // The box |x|, |y|, |z| ≤ 0.3: its exact distance, times k.
+        let host = sphere_trace(&rays, &TraceOptions::default(), |p: &[f32]| {
+            p.chunks_exact(3)
+                .map(|p| {
+                    let q = Vec3::new(p[0].abs(), p[1].abs(), p[2].abs()) - Vec3::splat(0.3);
+                    k * (q.max(Vec3::ZERO).length() + q.max_element().min(0.0))
+                })
+                .collect()
+        });
+        let traced = {
+            let rays = rays.clone();
+            ins_tests::within(
+                ins_tests::WGPU_LIMIT_S,
+                "tracing on the device",
+                move || {
+                    let field = move |x: Tensor<2>| {
+                        let [n, _] = x.dims();
+                        let q = x.abs().sub_scalar(0.3);
+                        let outside = q.clone().clamp_min(0.0).square().sum_dim(1).sqrt();
+                        let inside = q.max_dim(1).clamp_max(0.0);
+                        (outside + inside).mul_scalar(k).reshape([n])
+                    };
+                    let device = BackendChoice::Wgpu.device();
+                    sphere_trace_on_device(&rays, &TraceOptions::default(), field, &device)
+                },
+            )
+        };
+        assert_eq!(traced.hit, host.hit, "k = {k}: the rays that hit");
+        assert!(host.hit.iter().any(|&h| h) && !host.hit.iter().all(|&h| h));
+        for i in 0..rays.len() {
+            let (a, b) = if host.hit[i] {
+                (traced.t[i], host.t[i])
+            } else {
+                (traced.t_min_sdf[i], host.t_min_sdf[i])
+            };
+            assert!(
+                (a - b).abs() < 1e-4,
+                "k = {k}, ray {i}: {a} on wgpu, {b} on the host"
+            );
+        }
+    }
+}
+
 /// A capture's learned background, fitted on the device without a read-back, follows flex's
 /// fit on wgpu, a batch with a NaN left out.
 #[test]
