@@ -10,5 +10,4 @@ pub mod samplers;
 pub mod sdf_volume;
 pub mod sort_rows;
 pub mod sphere_tracing;
-pub mod sphere_tracing_device;
 pub mod volume;

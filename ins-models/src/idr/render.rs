@@ -5,8 +5,8 @@
 use burn::prelude::*;
 use ins_core::kernels::flex::is_flex;
 use ins_core::render::gather::select_parallel;
+use ins_core::render::sphere_tracing::device::sphere_trace_on_device;
 use ins_core::render::sphere_tracing::{TraceOptions, Traced, sphere_trace};
-use ins_core::render::sphere_tracing_device::sphere_trace_on_device;
 use ins_core::shape_buckets::{pad_rows, padded_size};
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{Rays, flatten};

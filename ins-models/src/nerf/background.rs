@@ -147,6 +147,83 @@ impl BackgroundFit {
     }
 }
 
+/// A NeRF task's background: the scene's colour, or for a capture that learns one, its fit on
+/// the device with the colour last read from it (a pretraining step reads nothing).
+#[derive(Debug, Clone)]
+pub struct SceneBackground {
+    colour: [f32; 3],
+    fit: Option<BackgroundFit>,
+    /// Whether the fit moved since `colour` was read from it.
+    unread: bool,
+}
+
+impl SceneBackground {
+    /// `scene`'s fixed colour, learned from there where the scene learns one.
+    pub fn for_scene(scene: &Scene, device: &Device) -> Self {
+        let colour = fixed_background(scene);
+        let fit = learns_background(scene)
+            .then(|| BackgroundFit::new(LearnedBackground::default(), colour, device));
+        Self {
+            colour,
+            fit,
+            unread: false,
+        }
+    }
+
+    /// Continues from a pretrained run's sums (and the colour they give).
+    pub fn adopt(&mut self, sums: LearnedBackground, device: &Device) {
+        self.colour = sums.colour(self.colour);
+        self.fit = Some(BackgroundFit::new(sums, self.colour, device));
+        self.unread = false;
+    }
+
+    /// The colour now, read from the device if the fit moved since the last read.
+    pub fn now(&self) -> [f32; 3] {
+        match &self.fit {
+            Some(fit) if self.unread => fit.read().1,
+            _ => self.colour,
+        }
+    }
+
+    /// [`now`](Self::now), remembered until the fit moves again.
+    pub fn read(&mut self) -> [f32; 3] {
+        self.colour = self.now();
+        self.unread = false;
+        self.colour
+    }
+
+    /// The colour a pretraining step renders over: black where the fit composites its own.
+    pub fn rendered_over(&self) -> [f32; 3] {
+        if self.fit.is_some() {
+            [0.0; 3]
+        } else {
+            self.colour
+        }
+    }
+
+    /// A pretraining step's colour `[R, 3]` from the render over
+    /// [`rendered_over`](Self::rendered_over) (see [`BackgroundFit::composite_and_fit`]).
+    pub fn composite_and_fit(
+        &mut self,
+        rendered: Tensor<2>,
+        opacity: Tensor<1>,
+        target: Tensor<2>,
+    ) -> Tensor<2> {
+        match self.fit.as_mut() {
+            Some(fit) => {
+                self.unread = true;
+                fit.composite_and_fit(rendered, opacity, target)
+            }
+            None => rendered,
+        }
+    }
+
+    /// The learned sums, read (for a checkpoint).
+    pub fn sums(&self) -> Option<LearnedBackground> {
+        self.fit.as_ref().map(|fit| fit.read().0)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

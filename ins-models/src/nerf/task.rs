@@ -19,7 +19,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use super::background::{BackgroundFit, LearnedBackground, fixed_background, learns_background};
+use super::background::SceneBackground;
 use super::deferred::PatchRender;
 use super::early_stop::INVISIBLE_TRANSMITTANCE;
 use super::eval::{evaluate_views, save_eval_picture};
@@ -111,13 +111,8 @@ pub struct NerfTask {
     /// Evaluation schedule.
     pub eval: EvalSchedule,
     /// Background colour: white for alpha-composited photos, black for datasets and contracted
-    /// captures; an object capture in a box learns its own (see [`LearnedBackground`]), and
-    /// this is then its colour as last read from the device.
-    background: [f32; 3],
-    /// The learned background's fit, on the device (object captures in a box).
-    learned_background: Option<BackgroundFit>,
-    /// Whether the fit moved since `background` was read from it.
-    background_unread: bool,
+    /// captures; an object capture in a box learns its own (see [`SceneBackground`]).
+    background: SceneBackground,
     /// Pretraining step (in its phase) after which the training photos are audited
     /// ([`view_audit`](super::view_audit)); `None`: never.
     audit_at: Option<usize>,
@@ -145,9 +140,7 @@ impl NerfTask {
         eval: EvalSchedule,
         device: &Device,
     ) -> Self {
-        let background = fixed_background(&scene);
-        let learned_background = learns_background(&scene)
-            .then(|| BackgroundFit::new(LearnedBackground::default(), background, device));
+        let background = SceneBackground::for_scene(&scene, device);
         Self {
             scene,
             sampler,
@@ -156,8 +149,6 @@ impl NerfTask {
             style,
             eval,
             background,
-            learned_background,
-            background_unread: false,
             audit_at: None,
             dropped_views: Vec::new(),
             device: device.clone(),
@@ -184,9 +175,7 @@ impl NerfTask {
     /// leaves out the photos it dropped.
     fn adopt(&mut self, state: &NerfState) {
         if let Some(b) = state.background {
-            self.background = b.colour(self.background);
-            self.learned_background = Some(BackgroundFit::new(b, self.background, &self.device));
-            self.background_unread = false;
+            self.background.adopt(b, &self.device);
         }
         self.drop_views(&state.dropped_views);
     }
@@ -203,7 +192,7 @@ impl NerfTask {
     /// Scores every training photo against the field and leaves out those posed wrongly,
     /// naming them. Returns how many were dropped.
     fn audit_views(&mut self, model: &NerfModel, seed: u64) -> Result<usize> {
-        let background = self.background_read();
+        let background = self.background.read();
         let model = model.valid();
         let device = self.device.clone().inner();
         let fits = super::view_audit::fit_views(
@@ -240,20 +229,9 @@ impl NerfTask {
         Ok(views.len())
     }
 
-    /// The background colour now: a learned one is read from the device if it moved since
-    /// (pictures, checkpoints and stylizing read it, a pretraining step does not).
+    /// The background colour now (a learned one read from the device if it moved).
     pub fn background(&self) -> [f32; 3] {
-        match &self.learned_background {
-            Some(fit) if self.background_unread => fit.read().1,
-            _ => self.background,
-        }
-    }
-
-    /// [`background`](Self::background), remembered until the fit moves again.
-    fn background_read(&mut self) -> [f32; 3] {
-        self.background = self.background();
-        self.background_unread = false;
-        self.background
+        self.background.now()
     }
 
     /// The sampling for this step's render.
@@ -330,30 +308,20 @@ impl NerfTask {
             (out.fine.rgb.clone() + rest * bg, target, out)
         } else {
             // A learned background is composited here, over the field rendered on black.
-            let background = match self.learned_background {
-                Some(_) => [0.0; 3],
-                None => self.background,
-            };
             let out = render(
                 model,
                 &rays,
                 self.sampling(),
                 None,
-                background,
+                self.background.rendered_over(),
                 Some(seed),
                 &self.device,
             );
-            let pred = match self.learned_background.as_mut() {
-                Some(fit) => {
-                    self.background_unread = true;
-                    fit.composite_and_fit(
-                        out.fine.rgb.clone(),
-                        out.fine.opacity.clone(),
-                        target.clone(),
-                    )
-                }
-                None => out.fine.rgb.clone(),
-            };
+            let pred = self.background.composite_and_fit(
+                out.fine.rgb.clone(),
+                out.fine.opacity.clone(),
+                target.clone(),
+            );
             (pred, target, out)
         };
         self.last_samples = out.samples;
@@ -380,7 +348,7 @@ impl NerfTask {
             .as_ref()
             .context("a stylization phase without styles")?;
         let spec = style.patch;
-        let background = self.background_read();
+        let background = self.background.read();
         let style = self
             .style
             .as_ref()
@@ -515,7 +483,7 @@ impl NerfTask {
             &self.eval.views,
             self.sampling(),
             first_code,
-            self.background(),
+            self.background.now(),
             &device,
         )?;
         let pictures: Vec<RgbImage> = views.iter().map(|v| v.picture(&self.scene)).collect();
@@ -594,7 +562,7 @@ impl Task for NerfTask {
         Ok(Some(super::state_io::encode(&NerfState {
             samples_per_ray: self.samples_per_ray,
             grid: self.grid.clone(),
-            background: self.learned_background.as_ref().map(|fit| fit.read().0),
+            background: self.background.sums(),
             dropped_views: self.dropped_views.clone(),
         })))
     }

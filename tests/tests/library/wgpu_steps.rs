@@ -408,8 +408,8 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
 /// misses.
 #[test]
 fn surfaces_are_traced_on_wgpu_as_on_the_host() {
+    use ins_core::render::sphere_tracing::device::sphere_trace_on_device;
     use ins_core::render::sphere_tracing::{TraceOptions, sphere_trace};
-    use ins_core::render::sphere_tracing_device::sphere_trace_on_device;
     use ins_scene::geometry::Vec3;
     use ins_scene::rays::Rays;
     let mut rays = Rays::default();

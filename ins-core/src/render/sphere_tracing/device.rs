@@ -1,4 +1,4 @@
-//! [`sphere_trace`](super::sphere_tracing::sphere_trace) for GPUs: the same three steps, with
+//! [`sphere_trace`](super::sphere_trace) for GPUs: the same three steps, with
 //! the march's rounds and the secant's kept on the device.
 //!
 //! Why: the host's tracer reads the SDF back once a round, up to 42 times a trace (32 march
@@ -11,13 +11,12 @@
 use burn::prelude::*;
 use ins_scene::rays::Rays;
 
-use super::sphere_tracing::{
-    Bracket, Closest, MarchMinimum, Marched, TraceOptions, Traced, conclude, search_the_rest,
-};
+use super::records::{Bracket, Closest, MarchMinimum};
+use super::{Marched, TraceOptions, Traced, conclude, search_the_rest};
 use crate::shape_buckets::{pad_rows, padded_size};
 
 /// Traces `rays` against `sdf` (points `[N, 3]` → signed distances `[N]`, no gradient) on
-/// `device`, giving what [`sphere_trace`](super::sphere_tracing::sphere_trace) gives.
+/// `device`, giving what [`sphere_trace`](super::sphere_trace) gives.
 pub fn sphere_trace_on_device(
     rays: &Rays,
     opts: &TraceOptions,
