@@ -6,7 +6,8 @@
 # - Sphere tracing's share: an IDR stylization traces its patch's rays against the frozen
 #   surface every step (off a CPU its rounds on the device, four reads a trace); its metrics
 #   log the tracing's wall time (`trace_ms`) beside the step's (`ms`).
-# - SPIR-V instead of WGSL, where pack.sh packed a `--features spirv` binary (SPIRV_BIN).
+# - SPIR-V instead of WGSL, where pack.sh packed a `--features spirv` binary (SPIRV_BIN;
+#   scripts/spirv_check.sh proves that build on lavapipe first).
 # Each stage under its own timeout, all under DEADLINE seconds; summaries go to $OUT.
 DEADLINE=${DEADLINE:-300}
 source scripts/gpu/lib.sh
@@ -43,6 +44,8 @@ for backend in cuda wgpu; do
 done
 if [ -f .dev/ins-cli-spirv.xz ]; then
   unpack ins-cli-spirv
-  stage spirv_bench 70 /tmp/ins-cli-spirv bench --backend wgpu --steps 3 hash-grid-object nerf-grid vgg
+  # VGG first: its convolutions are where cooperative matrices (tensor cores through Vulkan)
+  # would count. Profiled, so a stage that runs out of time still shows how far it got.
+  profiled prof_spirv 90 /tmp/ins-cli-spirv bench --backend wgpu --steps 3 vgg nerf-grid
 fi
 stamp "all done"
