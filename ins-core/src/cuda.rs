@@ -40,6 +40,11 @@ fn error(message: impl Into<String>) -> GpuError {
     }
 }
 
+/// How `scripts/cuda_standin`'s stand-in for the driver names its device: it compiles every
+/// kernel through the real NVRTC and runs none (`scripts/cuda_compile_check.sh`), so the first
+/// kernel's sum is not checked on it.
+const STANDIN_DRIVER: &str = "INS-rs CUDA stand-in";
+
 /// Where the other backends are, for every message.
 const WAYS_OUT: &str = "or run with --backend wgpu (Vulkan) or --backend flex (the CPU)";
 
@@ -64,6 +69,8 @@ fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
     });
     match first {
         Ok(6.0) => {}
+        // The compile-only stand-in driver runs no kernel: its sum means nothing.
+        Ok(_) if name.starts_with(STANDIN_DRIVER) => {}
         Ok(v) => {
             return Err(error(format!(
                 "a first kernel on {name} summed 1 + 2 + 3 to {v}, {WAYS_OUT}"
@@ -126,13 +133,78 @@ fn headers() -> Result<(), GpuError> {
         )));
     };
     let include = root.join("include");
-    if include.join("cuda_runtime.h").is_file() {
-        Ok(())
-    } else {
-        Err(error(format!(
-            "{} has no cuda_runtime.h: NVRTC compiles the kernels against CUDA's headers; set \
-             CUDA_PATH to a folder whose include/ holds them, {WAYS_OUT}",
-            include.display()
-        )))
+    match missing_header(&include) {
+        None => Ok(()),
+        Some(header) => Err(error(format!(
+            "{} has no {}: NVRTC compiles the kernels against CUDA's headers ({}); install the \
+             CUDA toolkit or set CUDA_PATH to a folder whose include/ holds them, {WAYS_OUT}",
+            include.display(),
+            header.path,
+            header.why
+        ))),
+    }
+}
+
+/// A header the kernels need, and why, for the message when it is missing.
+struct Header {
+    path: &'static str,
+    /// Other places it may be (CUDA 13 keeps CCCL's headers under `include/cccl`).
+    or: &'static [&'static str],
+    why: &'static str,
+}
+
+/// What CubeCL's CUDA C++ includes. A machine with PyTorch's NVIDIA wheels and no toolkit has
+/// the first and third, but not `crt/mma.h`, which the tensor-core matmuls' `<mma.h>` includes:
+/// found with the offline compile check (`scripts/cuda_compile_check.sh`), where every such
+/// kernel failed to compile without it.
+const HEADERS: [Header; 3] = [
+    Header {
+        path: "cuda_runtime.h",
+        or: &[],
+        why: "the CUDA runtime's; in PyTorch's wheels, nvidia-cuda-runtime",
+    },
+    Header {
+        path: "crt/mma.h",
+        or: &[],
+        why: "which the tensor-core matmuls include; in CUDA 13's wheels, nvidia-cuda-crt, \
+              which PyTorch does not install",
+    },
+    Header {
+        path: "cuda/barrier",
+        or: &["cccl/cuda/barrier"],
+        why: "CCCL's; in PyTorch's wheels, nvidia-cuda-cccl",
+    },
+];
+
+/// The first header the kernels need that `include` lacks.
+fn missing_header(include: &Path) -> Option<&'static Header> {
+    HEADERS.iter().find(|h| {
+        !std::iter::once(h.path)
+            .chain(h.or.iter().copied())
+            .any(|p| include.join(p).is_file())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_header_the_kernels_need_is_looked_for_in_turn() {
+        let dir = tempfile::tempdir().unwrap();
+        let inc = dir.path();
+        let add = |p: &str| {
+            let f = inc.join(p);
+            std::fs::create_dir_all(f.parent().unwrap()).unwrap();
+            std::fs::write(f, "").unwrap();
+        };
+        assert_eq!(missing_header(inc).map(|h| h.path), Some("cuda_runtime.h"));
+        add("cuda_runtime.h");
+        // PyTorch's wheels stop here: the tensor-core matmuls would not compile.
+        assert_eq!(missing_header(inc).map(|h| h.path), Some("crt/mma.h"));
+        add("crt/mma.h");
+        assert_eq!(missing_header(inc).map(|h| h.path), Some("cuda/barrier"));
+        add("cccl/cuda/barrier"); // CUDA 13's place for it
+        assert!(missing_header(inc).is_none());
     }
 }

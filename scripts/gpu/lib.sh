@@ -35,12 +35,28 @@ cuda_env() { # CUDA_PATH and the library path for --backend cuda: NVRTC compiles
       for inc in $(find "$r" -maxdepth 3 -type d -name include); do cp -rsf "$inc"/. /tmp/cuda/include/ 2>/dev/null; done
       for lib in $(find "$r" -maxdepth 3 -type d -name lib); do LD_LIBRARY_PATH=$lib:${LD_LIBRARY_PATH:-}; done
     done
+    # crt/mma.h (the tensor-core matmuls include it) is in nvidia-cuda-crt, which PyTorch does
+    # not install: pack.sh packs that wheel for each CUDA 13 minor version; take NVRTC's.
+    if [ ! -f /tmp/cuda/include/crt/mma.h ] && ls .gl/crt/*.whl >/dev/null 2>&1; then
+      mkdir -p /tmp/cuda/include/crt
+      local v whl; v=$(python3 -c "import importlib.metadata as m; print('.'.join(m.version('nvidia-cuda-nvrtc').split('.')[:2]))" 2>/dev/null)
+      whl=$(ls .gl/crt/nvidia_cuda_crt-"$v".*.whl 2>/dev/null | head -1)
+      [ -n "$whl" ] || whl=$(ls .gl/crt/*.whl | sort -V | tail -1)
+      python3 - "$whl" <<'PY'
+import sys, zipfile
+z = zipfile.ZipFile(sys.argv[1])
+for n in z.namelist():
+    if "/include/crt/" in n:
+        with open("/tmp/cuda/include/crt/" + n.split("/include/crt/", 1)[1], "wb") as f:
+            f.write(z.read(n))
+PY
+    fi
     export CUDA_PATH=/tmp/cuda LD_LIBRARY_PATH
     # cudarc asks for libnvrtc.so by its major version's names; the wheels ship libnvrtc.so.N.
     local nvrtc; nvrtc=$(find $roots -name 'libnvrtc.so*' ! -name '*builtins*' 2>/dev/null | head -1)
     [ -n "$nvrtc" ] && ln -sf "$nvrtc" /tmp/cuda/lib64/libnvrtc.so && LD_LIBRARY_PATH=/tmp/cuda/lib64:$LD_LIBRARY_PATH
   fi
-  stamp "CUDA_PATH=$CUDA_PATH cuda_runtime.h: $(ls "$CUDA_PATH"/include/cuda_runtime.h 2>&1 | head -1); nvrtc: $(ldconfig -p | grep -c nvrtc) in ldconfig, $(find ${LD_LIBRARY_PATH//:/ } -maxdepth 1 -name 'libnvrtc*' 2>/dev/null | head -3 | tr '\n' ' ')"
+  stamp "CUDA_PATH=$CUDA_PATH cuda_runtime.h: $(ls "$CUDA_PATH"/include/cuda_runtime.h 2>&1 | head -1); crt/mma.h: $(ls "$CUDA_PATH"/include/crt/mma.h 2>&1 | head -1); nvrtc: $(ldconfig -p | grep -c nvrtc) in ldconfig, $(find ${LD_LIBRARY_PATH//:/ } -maxdepth 1 -name 'libnvrtc*' 2>/dev/null | head -3 | tr '\n' ' ')"
 }
 restore_vgg() { # the converted VGG-16 weights where the binary looks for them (pack.sh's .dev/vgg.*)
   [ -f .dev/vgg.meta ] || { stamp "no VGG-16 weights packed (VGG=0): stylizing stages will stop"; return; }

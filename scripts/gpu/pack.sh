@@ -3,7 +3,8 @@
 # 64 MiB): the release binary and the real-VGG f16 test stripped and xz-compressed (the test
 # left out, with a warning, where it would pass 64 MiB), the converted VGG-16 weights, lego at
 # 200² (every 4th val view), a painting, PyTorch's benchmark program, and Vulkan's loader and
-# libglvnd as .deb files in .gl/ (NVIDIA's Vulkan driver needs libGLdispatch).
+# libglvnd as .deb files in .gl/ (NVIDIA's Vulkan driver needs libGLdispatch), and CUDA's crt/
+# headers as wheels in .gl/crt/ (the CUDA backend's tensor-core kernels need them).
 # Run from the repository root after `cargo build --release -p ins-cli` and `ins-cli vgg fetch`.
 # PYTHON must have Pillow (for the 200² lego). For profile.sh's SPIR-V stage: SPIRV_BIN names a
 # binary built with `--features spirv` (packed as ins-cli-spirv.xz), and VGG=0 leaves the weights
@@ -67,6 +68,13 @@ for split, every in (("train", 1), ("val", 4)):
         Image.open(f"{src}/{p}.png").resize((200, 200), Image.BOX).save(f"{dst}/{p[2:]}.png", optimize=True)
     json.dump(t, open(f"{dst}/transforms_{split}.json", "w"))
 PY
+# CUDA's crt/ headers, which the tensor-core matmuls' <mma.h> includes and PyTorch's wheels lack
+# (nvidia-cuda-crt; found by scripts/cuda_compile_check.sh): one wheel per CUDA 13 minor
+# version, about 130 kB each; lib.sh's cuda_env takes the one matching the GPU machine's NVRTC.
+rm -rf .gl/crt && mkdir -p .gl/crt
+for v in 13.0 13.1 13.2; do
+  "$PYTHON" -m pip download -q --no-deps -d .gl/crt "nvidia-cuda-crt==$v.*"
+done
 o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
 mkdir -p /tmp/amd64/partial
 apt-get $o update >/dev/null
