@@ -1,6 +1,6 @@
 #!/bin/bash
 # Every CUDA kernel the program asks for, compiled here without a GPU (issue 48; by hand, not
-# in CI: about 25 minutes on 2 cores, most of it NVRTC).
+# in CI: about 30 minutes on 2 cores, most of it NVRTC).
 #
 # `--backend cuda` has run on no GPU yet, and a lent GPU gives 15 minutes: a kernel that NVRTC
 # refuses would spend them. So this runs the benchmark workloads and small training runs on
@@ -82,8 +82,10 @@ stage nerf "$BIN" train nerf --scene "$R/synth" --out "$R/nerf" --steps 40 --eva
 stage idr "$BIN" train idr --scene "$R/dtu" --out "$R/idr" --steps 40 --rays 256 --eval-every 20 \
   --quiet --backend cuda
 # The stylizations start from runs pretrained on flex (a stand-in run may end without a checkpoint).
-"$BIN" train nerf --scene "$R/synth" --out "$R/nerf_flex" --steps 40 --quiet --backend flex > /dev/null
-"$BIN" train idr --scene "$R/dtu" --out "$R/idr_flex" --steps 40 --rays 256 --quiet --backend flex > /dev/null
+"$BIN" train nerf --scene "$R/synth" --out "$R/nerf_flex" --steps 40 --quiet --backend flex \
+  > "$W/logs/nerf_flex" 2>&1 || { failed=1; tail -3 "$W/logs/nerf_flex"; }
+"$BIN" train idr --scene "$R/dtu" --out "$R/idr_flex" --steps 40 --rays 256 --quiet --backend flex \
+  > "$W/logs/idr_flex" 2>&1 || { failed=1; tail -3 "$W/logs/idr_flex"; }
 stage nerf_stylize "$BIN" train nerf --from "$R/nerf_flex" --style "$STYLE" --out "$R/nerf_st" \
   --steps 6 --quiet --backend cuda
 stage idr_stylize "$BIN" train idr --from "$R/idr_flex" --style "$STYLE" --out "$R/idr_st" \

@@ -16,7 +16,8 @@ impl Bracket {
     pub(super) fn secant(&self) -> f32 {
         let d = self.f1 - self.f0;
         if d.abs() > 1e-12 {
-            (self.t0 - self.f0 * (self.t1 - self.t0) / d).clamp(self.t0, self.t1)
+            // max/min, not clamp: bounds read from a diverged field (NaN) must not panic.
+            (self.t0 - self.f0 * (self.t1 - self.t0) / d).max(self.t0).min(self.t1)
         } else {
             0.5 * (self.t0 + self.t1)
         }
@@ -89,7 +90,7 @@ impl MarchMinimum {
             return t1;
         }
         let v = t1 - 0.5 * ((t1 - t0) * a - (t1 - t2) * b) / den;
-        if v.is_finite() { v.clamp(t0, t2) } else { t1 }
+        if v.is_finite() { v.max(t0).min(t2) } else { t1 }
     }
 }
 
