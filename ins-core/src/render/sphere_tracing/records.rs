@@ -17,7 +17,9 @@ impl Bracket {
         let d = self.f1 - self.f0;
         if d.abs() > 1e-12 {
             // max/min, not clamp: bounds read from a diverged field (NaN) must not panic.
-            (self.t0 - self.f0 * (self.t1 - self.t0) / d).max(self.t0).min(self.t1)
+            (self.t0 - self.f0 * (self.t1 - self.t0) / d)
+                .max(self.t0)
+                .min(self.t1)
         } else {
             0.5 * (self.t0 + self.t1)
         }
