@@ -17,7 +17,8 @@
 # Settings: CUDA_MINOR (default 13.0, PyTorch cu130's; the wheels' version), W (work folder,
 # default target/cuda-standin), BIN (default target/release/ins-cli), STEPS (bench steps, 3),
 # HOST_STEPS (the host-time bench's steps, 10), STAGES (which runs, default all:
-# bench nerf nerf_stylize idr idr_stylize host), KEEP_CACHE=1 (keep the last run's tuning).
+# bench nerf nerf_stylize idr idr_stylize host host_channel), KEEP_CACHE=1 (keep the last run's
+# tuning and compiled kernels).
 # Exit status 0 when every stage ran, every module compiled and assembled.
 set -uo pipefail
 W=${W:-target/cuda-standin}
@@ -57,7 +58,7 @@ stamp "NVRTC $(ls "$CU"/lib/libnvrtc.so.* | head -1 | xargs basename), CUDA_PATH
 failed=0; guarded=0
 stage() { # stage NAME command...: the run, its PTX in $W/ptx/NAME, its output in $W/logs/NAME
   local name=$1; shift
-  [[ " ${STAGES:-bench nerf nerf_stylize idr idr_stylize host} " == *" $name "* ]] || return 0
+  [[ " ${STAGES:-bench nerf nerf_stylize idr idr_stylize host host_channel} " == *" $name "* ]] || return 0
   mkdir -p "$W/ptx/$name"
   stamp "BEGIN $name: $*"
   STANDIN_PTX_DIR=$W/ptx/$name "$@" > "$W/logs/$name" 2>&1
@@ -90,10 +91,14 @@ stage nerf_stylize "$BIN" train nerf --from "$R/nerf_flex" --style "$STYLE" --ou
   --steps 6 --quiet --backend cuda
 stage idr_stylize "$BIN" train idr --from "$R/idr_flex" --style "$STYLE" --out "$R/idr_st" \
   --steps 6 --quiet --backend cuda
-# The host's time a step: the benchmark again, its kernels tuned by the first (each process still
-# compiles what it launches, in its first steps), over HOST_STEPS steps.
+# The host's time a step: the benchmark again, its kernels tuned and compiled by the first (the
+# PTX is kept in the cache), over HOST_STEPS steps, through the program's device handle (the
+# caller's thread), then through CubeCL's channels for comparison.
 stage host "$BIN" bench --backend cuda --steps "${HOST_STEPS:-10}" siren vgg nerf-pretrain \
   nerf-stylize idr-pretrain nerf-grid nerf-grid-stylize
+stage host_channel env CUBECL_DEVICE_HANDLE=channel "$BIN" bench --backend cuda \
+  --steps "${HOST_STEPS:-10}" siren vgg nerf-pretrain nerf-stylize idr-pretrain nerf-grid \
+  nerf-grid-stylize
 
 # Every module assembled for the H100 (sm_90a), two at a time.
 stamp "ptxas on $(find "$W/ptx" -name '*.ptx' | wc -l) modules"
@@ -116,10 +121,10 @@ echo "throughput-probe panics (stand-in timing, see above): $probe; other intern
 (( other == 0 )) || failed=1
 echo "training runs stopped by the divergence guard (expected here): $guarded"
 echo "host time a step (nothing runs on the stand-in; median and fastest of ${HOST_STEPS:-10} synced steps, ms):"
-grep -h '^{' "$W/logs/host" 2>/dev/null | "$PYTHON" -c '
+grep -h '^{' "$W/logs/host" "$W/logs/host_channel" 2>/dev/null | "$PYTHON" -c '
 import json, sys
 for line in sys.stdin:
     r = json.loads(line)
-    print("  %-18s %8.1f  %8.1f" % (r["workload"], r["ms_per_step"], r["min_ms"]))'
+    print("  %-18s %-10s %8.1f  %8.1f" % (r["workload"], r.get("device_handle", ""), r["ms_per_step"], r["min_ms"]))'
 stamp "done: $([ $failed = 0 ] && echo passed || echo FAILED)"
 exit $failed

@@ -49,6 +49,7 @@ const STANDIN_DRIVER: &str = "INS-rs CUDA stand-in";
 const WAYS_OUT: &str = "or run with --backend wgpu (Vulkan) or --backend flex (the CPU)";
 
 fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
+    crate::gpu::device_handle()?;
     let name = gpu_name()?;
     headers()?;
     // SAFETY: loads the NVRTC library by its usual names, and drops it.

@@ -20,6 +20,7 @@ use cubecl::config::autotune::{AutotuneLevel, BenchConfig};
 use cubecl::config::cache::CacheConfig;
 use cubecl::config::{CubeClRuntimeConfig, RuntimeConfig};
 use cubecl::wgpu::wgpu;
+use cubecl_common::device_handle::{DEVICE_HANDLE_VAR, DeviceHandleKind};
 
 /// How the adapter computes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -108,6 +109,16 @@ pub enum GpuError {
     Cuda {
         /// What is missing or failed, and what to do.
         message: String,
+    },
+    /// `CUBECL_DEVICE_HANDLE` names no handle CubeCL has.
+    #[error(
+        "CUBECL_DEVICE_HANDLE={value:?} names no device handle: use `reentrant` (the default: \
+         CubeCL's work in the calling thread) or `channel` (a thread per device service, \
+         CubeCL's own default), or leave it unset"
+    )]
+    DeviceHandle {
+        /// The variable's value.
+        value: String,
     },
     /// The adapter is there but refused to start.
     #[error(
@@ -200,6 +211,9 @@ fn program_config(kind: AdapterKind, cache: &Path) -> (CubeClRuntimeConfig, &'st
     // The environment variables CubeCL documents (CUBECL_AUTOTUNE_LEVEL, …) still apply.
     let mut cfg = CubeClRuntimeConfig::default().override_from_env();
     cfg.environment.path = CacheConfig::Directory(cache.to_path_buf());
+    // Compiled kernels kept between runs (CUDA's PTX; wgpu's WGSL goes to the driver, which
+    // keeps its own): without it every CUDA process compiled each kernel again with NVRTC.
+    cfg.compilation.cache = true;
     let tuning = match kind {
         AdapterKind::Software => {
             if std::env::var_os("CUBECL_AUTOTUNE_LEVEL").is_none() {
@@ -284,7 +298,33 @@ pub fn prepared() -> Option<&'static GpuRuntime> {
     RUNTIME.ready().or_else(crate::cuda::prepared)
 }
 
+/// How CubeCL reaches the device's services in this process (`third_party/cubecl-common-0.11.3`,
+/// patched: the caller's thread unless `CUBECL_DEVICE_HANDLE=channel`), checked before the first
+/// device so a mistyped value is an error, not CubeCL's default.
+pub(crate) fn device_handle() -> Result<DeviceHandleKind, GpuError> {
+    handle_named(std::env::var_os(DEVICE_HANDLE_VAR).as_deref())
+}
+
+/// The device handle this process uses, as `CUBECL_DEVICE_HANDLE` names it.
+pub fn device_handle_name() -> &'static str {
+    match DeviceHandleKind::current() {
+        DeviceHandleKind::Channel => "channel",
+        DeviceHandleKind::Reentrant => "reentrant",
+    }
+}
+
+fn handle_named(value: Option<&std::ffi::OsStr>) -> Result<DeviceHandleKind, GpuError> {
+    let Some(value) = value else {
+        return Ok(DeviceHandleKind::Reentrant);
+    };
+    let value = value.to_string_lossy();
+    DeviceHandleKind::parse(&value).ok_or_else(|| GpuError::DeviceHandle {
+        value: value.into_owned(),
+    })
+}
+
 fn start(cache: &Path) -> Result<GpuRuntime, GpuError> {
+    device_handle()?;
     let adapter = find_adapter()?;
     let (cache, user_config, tuning) = configure(adapter.kind, cache);
     match cubecl::wgpu::try_init_setup::<cubecl::wgpu::AutoGraphicsApi>(
@@ -339,7 +379,21 @@ mod tests {
     }
 
     #[test]
-    fn software_adapters_tune_with_one_sample_and_the_cache_is_the_one_given() {
+    fn the_device_handle_is_the_callers_thread_unless_a_known_one_is_named() {
+        use std::ffi::OsStr;
+        let named = |v: Option<&str>| handle_named(v.map(OsStr::new));
+        assert_eq!(named(None).unwrap(), DeviceHandleKind::Reentrant);
+        assert_eq!(named(Some("channel")).unwrap(), DeviceHandleKind::Channel);
+        assert_eq!(
+            named(Some("reentrant")).unwrap(),
+            DeviceHandleKind::Reentrant
+        );
+        let err = named(Some("threads")).unwrap_err().to_string();
+        assert!(err.contains("CUBECL_DEVICE_HANDLE=\"threads\"") && err.contains("`channel`"));
+    }
+
+    #[test]
+    fn software_adapters_tune_with_one_sample_and_kernels_are_kept_in_the_cache_given() {
         let cache = Path::new("/some/cache/cubecl");
         let (soft, _) = program_config(AdapterKind::Software, cache);
         if std::env::var_os("CUBECL_AUTOTUNE_LEVEL").is_none() {
@@ -352,5 +406,7 @@ mod tests {
             hard.autotune.bench.samples(),
             BenchConfig::default().samples()
         );
+        // Compiled kernels are kept between runs on both.
+        assert!(soft.compilation.cache && hard.compilation.cache);
     }
 }

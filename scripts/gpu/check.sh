@@ -16,9 +16,13 @@ stamp "setup done"
 # ratios, then the lego pretrain twice (cold, then with its kernels cached), its stylization
 # and the SIREN main job.
 stage bench_cuda 120 $BIN bench --backend cuda --steps 3 siren vgg nerf-pretrain nerf-stylize idr-pretrain nerf-grid
+# The same through CubeCL's own device threads and channels, which the program replaced by the
+# caller's thread (third_party/cubecl-common-0.11.3/PATCHED.md): the table's "(channel)" rows.
+stage bench_cuda_channel 60 env CUBECL_DEVICE_HANDLE=channel $BIN bench --backend cuda --steps 3 siren vgg nerf-pretrain nerf-grid
 stage torch 40 python3 .dev/torch_ref.py --device cuda --steps 5
 stage torch_grid 60 python3 scripts/torch_grid_ref.py --device cuda --steps 5
 stage bench_ref 90 $BIN bench --backend wgpu --steps 3 siren vgg nerf-pretrain nerf-stylize idr-pretrain nerf-grid
+stage bench_wgpu_channel 45 env CUBECL_DEVICE_HANDLE=channel $BIN bench --backend wgpu --steps 3 siren nerf-grid
 stage lego_pretrain_cuda_cold 120 $BIN train nerf --scene .dev/lego200 --out $R/lego_cuda --quiet --backend cuda
 metrics $R/lego_cuda 3
 stage lego_pretrain_cuda_warm 60 $BIN train nerf --scene .dev/lego200 --out $R/lego_cuda2 --quiet --backend cuda

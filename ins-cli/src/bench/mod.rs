@@ -120,6 +120,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
             let bf16 = precision != Precision::F32 && ins_core::kernels::dense_bf16::available();
             line["products"] = if bf16 { "bf16" } else { "f32" }.into();
         }
+        if backend.to_string() != "flex" {
+            line["device_handle"] = ins_core::gpu::device_handle_name().into();
+        }
         if let Some(rays) = timing.rays {
             line["rays_per_s"] = ((rays / median * 1e3).round()).into();
         }
