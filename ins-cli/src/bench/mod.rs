@@ -120,7 +120,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             let bf16 = precision != Precision::F32 && ins_core::kernels::dense_bf16::available();
             line["products"] = if bf16 { "bf16" } else { "f32" }.into();
         }
-        if backend.to_string() != "flex" {
+        if backend != ins_core::backend::BackendChoice::Flex {
             line["device_handle"] = ins_core::gpu::device_handle_name().into();
         }
         if let Some(rays) = timing.rays {
