@@ -5,6 +5,7 @@
 pub mod beyond_sphere;
 pub mod flagged_picks;
 pub mod gather;
+pub mod marched_layout;
 pub mod occupancy;
 pub mod samplers;
 pub mod sdf_volume;

@@ -7,6 +7,7 @@
 //! occupied when `density · step > min(threshold, mean)` (nerfacc's rule), so a sample whose
 //! cell has recorded a density above the threshold is never culled.
 
+use burn::prelude::Tensor;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -165,6 +166,19 @@ impl OccupancyGrid {
         }
     }
 
+    /// [`OccupancyGrid::field_point`] of each row of `points [N, 3]`, on the device.
+    pub fn field_points(&self, points: Tensor<2>) -> Tensor<2> {
+        let Some(c) = self.contraction else {
+            return points;
+        };
+        // Outside the cube of half side `radius`, p · (2 − r/n) · r/n with n = max |p_i|.
+        let n = points.clone().abs().max_dim(1);
+        let inside = n.clone().lower_equal_elem(c.radius);
+        let q = n.recip() * c.radius;
+        let scale = (q.clone().neg() + 2.0) * q;
+        points * scale.mask_fill(inside, 1.0)
+    }
+
     /// A step of half a cell along the box's longest side: fine enough that no cell is
     /// skipped between samples.
     pub fn default_step(resolution: u32, min: Vec3, max: Vec3) -> f32 {
@@ -298,6 +312,7 @@ impl OccupancyGrid {
             min: Vec3::from(self.min),
             max: Vec3::from(self.max),
         };
+        let blocks = Blocks::of(self);
         let per_ray: Vec<Vec<(f32, f32)>> = (0..rays.len())
             .into_par_iter()
             .map(|i| {
@@ -322,17 +337,36 @@ impl OccupancyGrid {
                     None => 0.5,
                 };
                 let mut out = Vec::new();
-                let mut t = t0 + offset * dt;
                 match &self.contraction {
                     None => {
-                        while t < t1 && out.len() < max_per_ray {
-                            if self.is_occupied(o + d * t) {
-                                out.push((t, dt));
+                        // Sample k sits at `t0 + (offset + k)·dt`; empty blocks are crossed
+                        // in one jump.
+                        let mut k = 0usize;
+                        loop {
+                            let t = t0 + (offset + k as f32) * dt;
+                            if t >= t1 || out.len() >= max_per_ray {
+                                break;
                             }
-                            t += dt;
+                            let p = o + d * t;
+                            match self.cell_of(p) {
+                                Some(c) if self.occupied[c] => out.push((t, dt)),
+                                Some(c) if !blocks.occupied(c) => {
+                                    let exit = blocks.exit(c, o, d);
+                                    // One step short of the exit: every step skipped lies a
+                                    // cell inside the block, whatever the rounding.
+                                    let last = ((exit - t0) / dt - offset).floor() - 1.0;
+                                    if last > k as f32 + 1.0 {
+                                        k = last as usize;
+                                        continue;
+                                    }
+                                }
+                                _ => {}
+                            }
+                            k += 1;
                         }
                     }
                     Some(c) => {
+                        let mut t = t0 + offset * dt;
                         while t < t1 && out.len() < max_per_ray {
                             let p = o + d * t;
                             let step = dt * c.step_scale(p);
@@ -360,6 +394,85 @@ impl OccupancyGrid {
             s.offsets.push(s.t.len() as u32);
         }
         s
+    }
+}
+
+/// Cells per side of a [`Blocks`] block.
+const BLOCK: usize = 8;
+
+/// Which blocks of 8³ cells hold an occupied cell, for marching across empty space a block at
+/// a time (instant-ngp's coarser grid levels do the same). Derived from the bits on every march
+/// (a pass over the grid, under a millisecond at 128³) so it can never go stale.
+struct Blocks {
+    /// Blocks per axis.
+    per_axis: usize,
+    /// Cells per axis.
+    resolution: usize,
+    occupied: Vec<bool>,
+    min: Vec3,
+    cell: Vec3,
+}
+
+impl Blocks {
+    fn of(grid: &OccupancyGrid) -> Self {
+        let r = grid.resolution as usize;
+        let per_axis = r.div_ceil(BLOCK);
+        // One z-slab of blocks per task: each scans its own cells.
+        let occupied = (0..per_axis)
+            .into_par_iter()
+            .flat_map_iter(|bz| {
+                let mut slab = vec![false; per_axis * per_axis];
+                for z in bz * BLOCK..((bz + 1) * BLOCK).min(r) {
+                    for y in 0..r {
+                        let row = &grid.occupied[(z * r + y) * r..(z * r + y + 1) * r];
+                        for (x, _) in row.iter().enumerate().filter(|(_, o)| **o) {
+                            slab[(y / BLOCK) * per_axis + x / BLOCK] = true;
+                        }
+                    }
+                }
+                slab
+            })
+            .collect();
+        Self {
+            per_axis,
+            resolution: r,
+            occupied,
+            min: Vec3::from(grid.min),
+            cell: grid.cell_size(),
+        }
+    }
+
+    /// The block of cell `c`, as block coordinates.
+    fn block(&self, c: usize) -> [usize; 3] {
+        let r = self.resolution;
+        [(c % r) / BLOCK, (c / r % r) / BLOCK, (c / (r * r)) / BLOCK]
+    }
+
+    /// Whether the block of cell `c` holds an occupied cell.
+    fn occupied(&self, c: usize) -> bool {
+        let [x, y, z] = self.block(c);
+        self.occupied[(z * self.per_axis + y) * self.per_axis + x]
+    }
+
+    /// Where the ray `o + t·d` leaves the block of cell `c` (which it is in).
+    fn exit(&self, c: usize, o: Vec3, d: Vec3) -> f32 {
+        let b = Vec3::from(self.block(c).map(|v| v as f32));
+        let lo = self.min + b * BLOCK as f32 * self.cell;
+        let hi = self.min
+            + (b * BLOCK as f32 + BLOCK as f32).min(Vec3::splat(self.resolution as f32))
+                * self.cell;
+        let plane = |lo: f32, hi: f32, o: f32, d: f32| {
+            if d > 0.0 {
+                (hi - o) / d
+            } else if d < 0.0 {
+                (lo - o) / d
+            } else {
+                f32::INFINITY
+            }
+        };
+        plane(lo.x, hi.x, o.x, d.x)
+            .min(plane(lo.y, hi.y, o.y, d.y))
+            .min(plane(lo.z, hi.z, o.z, d.z))
     }
 }
 
@@ -468,6 +581,90 @@ mod tests {
         );
     }
 
+    /// Every step tested, none skipped: what [`OccupancyGrid::march`] must equal.
+    fn march_every_step(g: &OccupancyGrid, rays: &Rays, max: usize, seed: u64) -> Vec<Vec<f32>> {
+        let (lo, hi) = (Vec3::from(g.min), Vec3::from(g.max));
+        let bounds = ins_scene::geometry::Bounds::Aabb { min: lo, max: hi };
+        (0..rays.len())
+            .map(|i| {
+                let (o, d) = (rays.origins[i], rays.directions[i]);
+                let Some((b0, b1)) = bounds.intersect(o, d) else {
+                    return Vec::new();
+                };
+                let (t0, t1, dt) = (
+                    rays.near[i].max(b0),
+                    rays.far[i].min(b1),
+                    g.step / d.length(),
+                );
+                let offset =
+                    SmallRng::seed_from_u64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+                        .random::<f32>();
+                (0..)
+                    .map(|k| t0 + (offset + k as f32) * dt)
+                    .take_while(|&t| t < t1)
+                    .filter(|&t| g.is_occupied(o + d * t))
+                    .take(max)
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn crossing_empty_blocks_in_one_jump_keeps_every_sample() {
+        let mut rng = SmallRng::seed_from_u64(4);
+        // 37 cells a side: blocks of 8 with a partial one at the far end.
+        let mut g = OccupancyGrid::new(
+            37,
+            Vec3::new(-1.0, -0.5, -2.0),
+            Vec3::new(1.0, 1.5, 0.5),
+            0.02,
+        );
+        let mut rays = Rays::default();
+        for i in 0..400 {
+            let o = Vec3::new(rng.random(), rng.random(), rng.random()) * 6.0 - 3.0;
+            let target = Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5;
+            let mut d = target - o;
+            // Some rays along an axis (zero components), some not of unit length (NDC).
+            if i % 7 == 0 {
+                d = Vec3::new(0.0, 0.0, d.z);
+            } else if i % 5 == 0 {
+                d *= 0.37;
+            } else {
+                d = d.normalize();
+            }
+            rays.push(o, d, 0.0, 20.0);
+        }
+        // Empty, a few isolated cells, a ball, the faces of every other block (where a jump
+        // one step too far would land past a sample), and full.
+        let n = g.occupied.len();
+        for round in 0..5 {
+            for (c, o) in g.occupied.iter_mut().enumerate() {
+                let r = 37;
+                let p = Vec3::new((c % r) as f32, (c / r % r) as f32, (c / (r * r)) as f32);
+                *o = match round {
+                    0 => false,
+                    1 => c % 997 == 5,
+                    2 => (p - Vec3::splat(20.0)).length() < 9.0,
+                    3 => [p.x, p.y, p.z]
+                        .iter()
+                        .any(|&v| v as usize % 16 == 8 || v as usize % 16 == 15),
+                    _ => true,
+                };
+            }
+            let marched = g.march(&rays, 40, Some(round));
+            let every = march_every_step(&g, &rays, 40, round);
+            let per_ray: Vec<Vec<f32>> = marched
+                .offsets
+                .windows(2)
+                .map(|w| marched.t[w[0] as usize..w[1] as usize].to_vec())
+                .collect();
+            assert_eq!(per_ray, every, "occupancy pattern {round} of {n} cells");
+            if round > 0 {
+                assert!(!marched.is_empty(), "pattern {round} meets no ray");
+            }
+        }
+    }
+
     #[test]
     fn a_rebuild_forgets_the_fog_a_running_maximum_keeps() {
         let fog = |points: &[f32]| vec![5.0; points.len() / 3];
@@ -503,6 +700,39 @@ mod tests {
             "the new cube is not occupied"
         );
         assert_eq!(g.occupied.iter().filter(|&&o| o).count(), 27);
+    }
+
+    #[test]
+    fn field_points_on_the_device_are_the_hosts() {
+        let device = burn::prelude::Device::flex();
+        let g = OccupancyGrid::contracted(8, Contraction { radius: 1.5 });
+        let mut rng = SmallRng::seed_from_u64(3);
+        // Inside the cube, on its face, beyond it, and far away.
+        let mut points = vec![
+            Vec3::ZERO,
+            Vec3::new(1.5, -0.2, 0.3),
+            Vec3::new(-40.0, 2.0, 1.0),
+        ];
+        points.extend(
+            (0..50).map(|_| (Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5) * 8.0),
+        );
+        let flat: Vec<f32> = points.iter().flat_map(|p| p.to_array()).collect();
+        let t = Tensor::<1>::from_floats(flat.as_slice(), &device).reshape([points.len(), 3]);
+        let got = g.field_points(t).into_data().to_vec::<f32>().unwrap();
+        for (p, q) in points.iter().zip(got.chunks_exact(3)) {
+            let want = g.field_point(*p);
+            assert!(
+                (want - Vec3::new(q[0], q[1], q[2])).abs().max_element() < 1e-5,
+                "{p}: {want} vs {q:?}"
+            );
+        }
+        // A grid over a box evaluates the field at the points themselves.
+        let plain = OccupancyGrid::new(4, Vec3::ZERO, Vec3::ONE, 0.1);
+        let t = Tensor::<1>::from_floats(flat.as_slice(), &device).reshape([points.len(), 3]);
+        assert_eq!(
+            plain.field_points(t).into_data().to_vec::<f32>().unwrap(),
+            flat
+        );
     }
 
     #[test]

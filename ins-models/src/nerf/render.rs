@@ -4,10 +4,11 @@
 use burn::prelude::*;
 use ins_core::kernels::flex::is_flex;
 use ins_core::render::gather::select_parallel;
-use ins_core::render::occupancy::{MarchedSamples, OccupancyGrid};
+use ins_core::render::marched_layout::DeviceSamples;
+use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
 use ins_core::render::volume::{Composite, composite, in_front_of_opaque};
-use ins_core::shape_buckets::{pad_rows, padded_size};
+use ins_core::shape_buckets::padded_size;
 use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
 use ins_scene::rays::{RayBatch, Rays, flatten};
@@ -213,33 +214,8 @@ fn render_marched(
     // of one step serve the next; the extra samples repeat the first and no ray reads them.
     let n_eval = padded_size(n, device);
     let width = padded_size(m.max_per_ray().max(1), device);
-    let x = sample_rows(&m, n_eval, |ray, t| {
-        grid.field_point(rays.rays.point(ray, t))
-    });
-    let dirs = sample_rows(&m, n_eval, |ray, _| rays.view_dirs[ray]);
-    // Padded [R, width] layout: index into the evaluated samples, `n_eval` (a zero) for padding.
-    let mut index = vec![n_eval as i64; r * width];
-    let mut t_pad = vec![0f32; r * width];
-    let mut delta_pad = vec![0f32; r * width];
-    for ray in 0..r {
-        let (a, b) = (m.offsets[ray] as usize, m.offsets[ray + 1] as usize);
-        for (j, k) in (a..b).enumerate() {
-            index[ray * width + j] = k as i64;
-            t_pad[ray * width + j] = m.t[k];
-            delta_pad[ray * width + j] = m.delta[k];
-        }
-        // Padding keeps the last distance so the depth of empty columns stays meaningful.
-        let last = if b > a {
-            m.t[b - 1]
-        } else {
-            rays.rays.near[ray]
-        };
-        for j in (b - a)..width {
-            t_pad[ray * width + j] = last;
-        }
-    }
-    let points = tensor2(x, n_eval, 3, device);
-    let dirs = model.field.color.encode_dirs(&dirs, device);
+    let samples = DeviceSamples::upload(&m, n_eval, device);
+    let (points, dirs) = sample_inputs(model, rays, grid, &samples, device);
     let ev = match geometry {
         Some((raw, features, mut index)) => {
             index.resize(n_eval, index[0]);
@@ -252,15 +228,17 @@ fn render_marched(
         None => model.evaluate(points.clone(), dirs, codes),
     };
     let s = ev.density.dims()[0];
-    let index = Tensor::<1, Int>::from_data(TensorData::new(index, [r * width]), device);
+    // Padded [R, width] layout: index into the evaluated samples, `n_eval` (a zero) for padding.
+    let layout = samples.padded(&rays.rays.near, width);
+    let index = layout.index;
     let density = select_parallel(
         Tensor::cat(vec![ev.density, Tensor::zeros([s, 1], device)], 1),
         1,
         index.clone(),
     )
     .reshape([s * r, width]);
-    let t = repeat_rows(tensor2(t_pad, r, width, device), s);
-    let delta = repeat_rows(tensor2(delta_pad, r, width, device), s);
+    let t = repeat_rows(layout.t, s);
+    let delta = repeat_rows(layout.delta, s);
     let density = match until_opaque.filter(|_| !on_cpu) {
         Some(min_transmittance) => {
             density.clone() * in_front_of_opaque(density, delta.clone(), min_transmittance)
@@ -282,14 +260,28 @@ fn render_marched(
     }
 }
 
-/// A value `at(ray, t)` for each of `m`'s samples as rows of three, padded to `rows` rows.
-fn sample_rows(m: &MarchedSamples, rows: usize, at: impl Fn(usize, f32) -> Vec3) -> Vec<f32> {
-    let mut out = Vec::with_capacity(rows * 3);
-    for (&ray, &t) in m.ray.iter().zip(&m.t) {
-        out.extend(at(ray as usize, t).to_array());
-    }
-    pad_rows(&mut out, 3, rows);
-    out
+/// The field's inputs at the marched `samples`: the points `[rows, 3]` (in the grid's
+/// coordinates) and the encoded view directions `[rows, d]`. Built on the device from the rays
+/// and each sample's ray and distance: the host encodes one direction a ray, not one a sample
+/// (issue 48: the host's work a step is a floor under the step on a GPU).
+fn sample_inputs(
+    model: &NerfModel,
+    rays: &RenderRays,
+    grid: &OccupancyGrid,
+    samples: &DeviceSamples,
+    device: &Device,
+) -> (Tensor<2>, Tensor<2>) {
+    let r = rays.len();
+    let origins = tensor2(flatten(&rays.rays.origins), r, 3, device);
+    let directions = tensor2(flatten(&rays.rays.directions), r, 3, device);
+    let points = grid.field_points(samples.points(origins, directions));
+    let dirs = samples.per_sample(
+        model
+            .field
+            .color
+            .encode_dirs(&flatten(&rays.view_dirs), device),
+    );
+    (points, dirs)
 }
 
 #[allow(clippy::too_many_arguments)]
