@@ -23,8 +23,6 @@ pub struct DeviceSamples {
     pub delta: Tensor<1>,
     /// First sample of each ray and one past the last, `[rays + 1]`.
     offsets: Tensor<1, Int>,
-    /// Samples marched (the rest of the `rows` are padding).
-    marched: usize,
 }
 
 /// The `[rays, width]` layout a render composites in: a ray's samples in its row, in order.
@@ -62,7 +60,6 @@ impl DeviceSamples {
             t: padded(&m.t),
             delta: padded(&m.delta),
             offsets: Tensor::from_data(TensorData::new(offsets, [n_offsets]), device),
-            marched: m.len(),
         }
     }
 
@@ -127,11 +124,6 @@ impl DeviceSamples {
             .mask_fill(inside.bool_not(), 0.0);
         PaddedLayout { index, t, delta }
     }
-
-    /// Samples marched, padding excluded.
-    pub fn marched(&self) -> usize {
-        self.marched
-    }
 }
 
 #[cfg(test)]
@@ -184,24 +176,28 @@ mod tests {
         let near = [0.25, 0.5, 0.75, 1.25, 1.5];
         let (rows, width) = (11, 7);
         let s = DeviceSamples::upload(&m, rows, &device);
-        assert_eq!((s.rows(), s.marched()), (rows, 8));
+        assert_eq!(s.rows(), rows);
         let got = s.padded(&near, width);
         let (index, t, delta) = host_layout(&m, rows, &near, width);
         assert_eq!(
             got.index
                 .into_data()
                 .convert::<i64>()
-                .to_vec::<i64>()
+                .try_to_vec::<i64>()
                 .unwrap(),
             index
         );
-        assert_eq!(got.t.into_data().to_vec::<f32>().unwrap(), t);
-        assert_eq!(got.delta.into_data().to_vec::<f32>().unwrap(), delta);
+        assert_eq!(got.t.into_data().try_to_vec::<f32>().unwrap(), t);
+        assert_eq!(got.delta.into_data().try_to_vec::<f32>().unwrap(), delta);
         // Each sample's point and a per-ray value, padding repeating the first sample.
         let o = Tensor::<2>::from_floats([[0.0, 0.0, 0.0]; 5], &device)
             + Tensor::<1>::from_floats([0.0, 1.0, 2.0, 3.0, 4.0], &device).unsqueeze_dim(1);
         let d = Tensor::<2>::from_floats([[1.0, 0.0, -1.0]; 5], &device);
-        let p = s.points(o.clone(), d).into_data().to_vec::<f32>().unwrap();
+        let p = s
+            .points(o.clone(), d)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
         let mut want = Vec::new();
         let firsts = std::iter::repeat_n(0, rows - m.len());
         for k in (0..m.len()).chain(firsts) {
@@ -209,7 +205,7 @@ mod tests {
             want.extend([ray + t, ray, ray - t]);
         }
         assert_eq!(p, want);
-        let per = s.per_sample(o).into_data().to_vec::<f32>().unwrap();
+        let per = s.per_sample(o).into_data().try_to_vec::<f32>().unwrap();
         assert_eq!(per.len(), rows * 3);
         assert_eq!(per[..3], [1.0, 1.0, 1.0]);
         assert_eq!(per[rows * 3 - 3..], [1.0, 1.0, 1.0]);

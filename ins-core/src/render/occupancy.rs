@@ -718,7 +718,7 @@ mod tests {
         );
         let flat: Vec<f32> = points.iter().flat_map(|p| p.to_array()).collect();
         let t = Tensor::<1>::from_floats(flat.as_slice(), &device).reshape([points.len(), 3]);
-        let got = g.field_points(t).into_data().to_vec::<f32>().unwrap();
+        let got = g.field_points(t).into_data().try_to_vec::<f32>().unwrap();
         for (p, q) in points.iter().zip(got.chunks_exact(3)) {
             let want = g.field_point(*p);
             assert!(
@@ -730,7 +730,11 @@ mod tests {
         let plain = OccupancyGrid::new(4, Vec3::ZERO, Vec3::ONE, 0.1);
         let t = Tensor::<1>::from_floats(flat.as_slice(), &device).reshape([points.len(), 3]);
         assert_eq!(
-            plain.field_points(t).into_data().to_vec::<f32>().unwrap(),
+            plain
+                .field_points(t)
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap(),
             flat
         );
     }
