@@ -54,7 +54,7 @@ pub fn padded_size(n: usize, device: &Device) -> usize {
 
 /// Pads row-major `values` (rows of `width`) to `rows` rows by repeating the first row: the
 /// inert filler of a bucketed batch (its rows are evaluated and never read).
-pub fn pad_rows(values: &mut Vec<f32>, width: usize, rows: usize) {
+pub fn pad_rows<T: Clone>(values: &mut Vec<T>, width: usize, rows: usize) {
     let have = values.len() / width;
     values.reserve(rows.saturating_sub(have) * width);
     for _ in have..rows {

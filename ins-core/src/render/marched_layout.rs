@@ -9,7 +9,8 @@
 
 use burn::prelude::*;
 
-use super::occupancy::MarchedSamples;
+use super::marched_samples::MarchedSamples;
+use crate::shape_buckets::pad_rows;
 
 /// The samples of a [`MarchedSamples`], uploaded once: each sample's ray, distance and length,
 /// padded to `rows` by repeating the first sample (the bucketed sizes of GPUs), and where each
@@ -45,12 +46,11 @@ impl DeviceSamples {
             "{} samples into {rows} rows",
             m.len()
         );
-        let pad = rows - m.len();
         let mut ray: Vec<i64> = m.ray.iter().map(|&i| i64::from(i)).collect();
-        ray.extend(std::iter::repeat_n(ray[0], pad));
+        pad_rows(&mut ray, 1, rows);
         let padded = |v: &[f32]| {
             let mut v = v.to_vec();
-            v.extend(std::iter::repeat_n(v[0], pad));
+            pad_rows(&mut v, 1, rows);
             Tensor::<1>::from_floats(v.as_slice(), device)
         };
         let offsets: Vec<i64> = m.offsets.iter().map(|&o| i64::from(o)).collect();

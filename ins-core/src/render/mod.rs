@@ -3,9 +3,11 @@
 //! rays and patches come from `ins-scene`, in its one camera convention.
 
 pub mod beyond_sphere;
+mod empty_blocks;
 pub mod flagged_picks;
 pub mod gather;
 pub mod marched_layout;
+pub mod marched_samples;
 pub mod occupancy;
 pub mod samplers;
 pub mod sdf_volume;

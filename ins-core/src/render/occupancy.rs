@@ -16,6 +16,9 @@ use serde::{Deserialize, Serialize};
 use ins_scene::geometry::{Contraction, Vec3};
 use ins_scene::rays::Rays;
 
+use super::empty_blocks::Blocks;
+use super::marched_samples::MarchedSamples;
+
 /// A density grid with occupancy bits.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct OccupancyGrid {
@@ -40,95 +43,6 @@ pub struct OccupancyGrid {
     /// and [`OccupancyGrid::field_point`] gives the coordinates the field is queried at.
     #[serde(default)]
     pub contraction: Option<Contraction>,
-}
-
-/// Samples produced by marching rays through a grid: only those in occupied cells.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct MarchedSamples {
-    /// Ray of each sample.
-    pub ray: Vec<u32>,
-    /// Distance along the ray.
-    pub t: Vec<f32>,
-    /// Length of ray the sample stands for.
-    pub delta: Vec<f32>,
-    /// First sample of each ray, plus one past the end (`rays + 1` entries).
-    pub offsets: Vec<u32>,
-}
-
-impl MarchedSamples {
-    /// Number of samples.
-    pub fn len(&self) -> usize {
-        self.t.len()
-    }
-
-    /// Whether there are none.
-    pub fn is_empty(&self) -> bool {
-        self.t.is_empty()
-    }
-
-    /// The most samples any ray got.
-    pub fn max_per_ray(&self) -> usize {
-        self.offsets
-            .windows(2)
-            .map(|w| (w[1] - w[0]) as usize)
-            .max()
-            .unwrap_or(0)
-    }
-
-    /// The next round of samples along the rays still open: up to `round` more of each ray
-    /// from its `cursor` (an index into `self`, moved past them), skipping the rays whose
-    /// `transmittance` fell below `min_transmittance` and those with no samples left. Returns
-    /// their indices into `self`, ray by ray. Renders that stop rays once opaque evaluate
-    /// rounds of growing length, so that few samples behind a surface are ever evaluated.
-    pub fn next_round(
-        &self,
-        cursor: &mut [usize],
-        transmittance: &[f32],
-        min_transmittance: f32,
-        round: usize,
-    ) -> Vec<usize> {
-        let mut index = Vec::new();
-        for (ray, at) in cursor.iter_mut().enumerate() {
-            let end = self.offsets[ray + 1] as usize;
-            if transmittance[ray] < min_transmittance || *at >= end {
-                continue;
-            }
-            let stop = at.saturating_add(round).min(end);
-            index.extend(*at..stop);
-            *at = stop;
-        }
-        index
-    }
-
-    /// Each ray's samples up to where it turns opaque under `density` (one value a sample,
-    /// in order): a sample is kept while the transmittance in front of it is at least
-    /// `min_transmittance`, so what the dropped ones could add to a pixel is below that. Also
-    /// returns the kept samples' indices into `self`. Why: with the density frozen
-    /// (stylization), the samples behind a surface cost the colour network's work and show
-    /// nothing.
-    pub fn until_opaque(&self, density: &[f32], min_transmittance: f32) -> (Self, Vec<u32>) {
-        let mut kept = Self {
-            offsets: Vec::with_capacity(self.offsets.len()),
-            ..Default::default()
-        };
-        let mut index = Vec::new();
-        kept.offsets.push(0);
-        for w in self.offsets.windows(2) {
-            let mut transmittance = 1f32;
-            for k in w[0] as usize..w[1] as usize {
-                if transmittance < min_transmittance {
-                    break;
-                }
-                kept.ray.push(self.ray[k]);
-                kept.t.push(self.t[k]);
-                kept.delta.push(self.delta[k]);
-                index.push(k as u32);
-                transmittance *= (-density[k].max(0.0) * self.delta[k]).exp();
-            }
-            kept.offsets.push(kept.t.len() as u32);
-        }
-        (kept, index)
-    }
 }
 
 impl OccupancyGrid {
@@ -185,7 +99,7 @@ impl OccupancyGrid {
         (max - min).max_element() / resolution as f32 * 0.5
     }
 
-    fn cell_size(&self) -> Vec3 {
+    pub(crate) fn cell_size(&self) -> Vec3 {
         (Vec3::from(self.max) - Vec3::from(self.min)) / self.resolution as f32
     }
 
@@ -397,85 +311,6 @@ impl OccupancyGrid {
     }
 }
 
-/// Cells per side of a [`Blocks`] block.
-const BLOCK: usize = 8;
-
-/// Which blocks of 8³ cells hold an occupied cell, for marching across empty space a block at
-/// a time (instant-ngp's coarser grid levels do the same). Derived from the bits on every march
-/// (a pass over the grid, under a millisecond at 128³) so it can never go stale.
-struct Blocks {
-    /// Blocks per axis.
-    per_axis: usize,
-    /// Cells per axis.
-    resolution: usize,
-    occupied: Vec<bool>,
-    min: Vec3,
-    cell: Vec3,
-}
-
-impl Blocks {
-    fn of(grid: &OccupancyGrid) -> Self {
-        let r = grid.resolution as usize;
-        let per_axis = r.div_ceil(BLOCK);
-        // One z-slab of blocks per task: each scans its own cells.
-        let occupied = (0..per_axis)
-            .into_par_iter()
-            .flat_map_iter(|bz| {
-                let mut slab = vec![false; per_axis * per_axis];
-                for z in bz * BLOCK..((bz + 1) * BLOCK).min(r) {
-                    for y in 0..r {
-                        let row = &grid.occupied[(z * r + y) * r..(z * r + y + 1) * r];
-                        for (x, _) in row.iter().enumerate().filter(|(_, o)| **o) {
-                            slab[(y / BLOCK) * per_axis + x / BLOCK] = true;
-                        }
-                    }
-                }
-                slab
-            })
-            .collect();
-        Self {
-            per_axis,
-            resolution: r,
-            occupied,
-            min: Vec3::from(grid.min),
-            cell: grid.cell_size(),
-        }
-    }
-
-    /// The block of cell `c`, as block coordinates.
-    fn block(&self, c: usize) -> [usize; 3] {
-        let r = self.resolution;
-        [(c % r) / BLOCK, (c / r % r) / BLOCK, (c / (r * r)) / BLOCK]
-    }
-
-    /// Whether the block of cell `c` holds an occupied cell.
-    fn occupied(&self, c: usize) -> bool {
-        let [x, y, z] = self.block(c);
-        self.occupied[(z * self.per_axis + y) * self.per_axis + x]
-    }
-
-    /// Where the ray `o + t·d` leaves the block of cell `c` (which it is in).
-    fn exit(&self, c: usize, o: Vec3, d: Vec3) -> f32 {
-        let b = Vec3::from(self.block(c).map(|v| v as f32));
-        let lo = self.min + b * BLOCK as f32 * self.cell;
-        let hi = self.min
-            + (b * BLOCK as f32 + BLOCK as f32).min(Vec3::splat(self.resolution as f32))
-                * self.cell;
-        let plane = |lo: f32, hi: f32, o: f32, d: f32| {
-            if d > 0.0 {
-                (hi - o) / d
-            } else if d < 0.0 {
-                (lo - o) / d
-            } else {
-                f32::INFINITY
-            }
-        };
-        plane(lo.x, hi.x, o.x, d.x)
-            .min(plane(lo.y, hi.y, o.y, d.y))
-            .min(plane(lo.z, hi.z, o.z, d.z))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -490,29 +325,6 @@ mod tests {
                 if inside { 10.0 } else { 0.0 }
             })
             .collect()
-    }
-
-    #[test]
-    fn samples_behind_an_opaque_point_are_dropped() {
-        // Two rays of four samples: the first turns opaque at its second sample, the second
-        // stays clear.
-        let m = MarchedSamples {
-            ray: vec![0, 0, 0, 0, 1, 1, 1, 1],
-            t: vec![0.1, 0.2, 0.3, 0.4, 0.1, 0.2, 0.3, 0.4],
-            delta: vec![0.1; 8],
-            offsets: vec![0, 4, 8],
-        };
-        let density = [0.5, 200.0, 200.0, 200.0, 0.5, 0.5, 0.5, 0.5];
-        let (kept, index) = m.until_opaque(&density, 1e-4);
-        assert_eq!(index, vec![0, 1, 4, 5, 6, 7]);
-        assert_eq!(kept.offsets, vec![0, 2, 6]);
-        assert_eq!(kept.ray, vec![0, 0, 1, 1, 1, 1]);
-        assert_eq!(kept.t, vec![0.1, 0.2, 0.1, 0.2, 0.3, 0.4]);
-        // What the dropped samples could add is below the threshold.
-        let behind: f32 = (-(0.5f32 + 200.0) * 0.1).exp();
-        assert!(behind < 1e-4);
-        // With no threshold every sample stays.
-        assert_eq!(m.until_opaque(&density, 0.0).0, m);
     }
 
     fn grid() -> OccupancyGrid {

@@ -32,7 +32,7 @@ pub fn weights(sigma: Tensor<2>, delta: Tensor<2>) -> Tensor<2> {
 
 /// 1 for the samples whose transmittance in front of them is at least `min_transmittance`, 0
 /// for those behind, `[R, S]`, under densities `sigma [R, S]` and spacings `delta [R, S]`: the
-/// samples [`MarchedSamples::until_opaque`](super::occupancy::MarchedSamples::until_opaque)
+/// samples [`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)
 /// keeps, found on the device. Multiplying the densities by it gives the render of the kept
 /// samples alone, without reading the densities back. No gradient flows through it.
 pub fn in_front_of_opaque(sigma: Tensor<2>, delta: Tensor<2>, min_transmittance: f32) -> Tensor<2> {
@@ -152,7 +152,7 @@ mod tests {
     /// The mask keeps exactly the samples the host's `until_opaque` keeps.
     #[test]
     fn the_samples_in_front_of_opaque_are_those_the_host_keeps() {
-        use crate::render::occupancy::MarchedSamples;
+        use crate::render::marched_samples::MarchedSamples;
         let d = Device::flex();
         let (r, w) = (6, 12);
         let mut m = MarchedSamples::default();

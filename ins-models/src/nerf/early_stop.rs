@@ -8,7 +8,8 @@
 
 use anyhow::{Context, Result, bail};
 use burn::prelude::*;
-use ins_core::render::occupancy::{MarchedSamples, OccupancyGrid};
+use ins_core::render::marched_samples::MarchedSamples;
+use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::shape_buckets::{pad_rows, padded_size};
 
 use super::model::NerfModel;
