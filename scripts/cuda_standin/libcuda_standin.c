@@ -8,6 +8,7 @@
 #define _GNU_SOURCE
 #include <cuda.h>
 #include <stdatomic.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -15,6 +16,17 @@
 
 static atomic_long modules, launches;
 static FILE *launch_log;
+// With $STANDIN_LAUNCH_LOG set, every launch, allocation, copy and sync is written there, one a
+// line: what a step asks of the driver, counted without a GPU.
+static void log_call(const char *fmt, ...) {
+  const char *path = getenv("STANDIN_LAUNCH_LOG");
+  if (path && !launch_log) launch_log = fopen(path, "a");
+  if (!launch_log) return;
+  va_list args;
+  va_start(args, fmt);
+  vfprintf(launch_log, fmt, args);
+  va_end(args);
+}
 
 static void *device_bytes(size_t size) {
   // Lazily backed: a memory pool's large pages cost nothing until written.
@@ -91,12 +103,12 @@ CUresult cuDevicePrimaryCtxRetain(CUcontext *c, CUdevice d) { (void)d; *c = (CUc
 CUresult cuDevicePrimaryCtxRelease(CUdevice d) { (void)d; return CUDA_SUCCESS; }
 CUresult cuCtxSetCurrent(CUcontext c) { (void)c; return CUDA_SUCCESS; }
 CUresult cuCtxGetCurrent(CUcontext *c) { *c = (CUcontext)&token; return CUDA_SUCCESS; }
-CUresult cuCtxSynchronize(void) { return CUDA_SUCCESS; }
+CUresult cuCtxSynchronize(void) { log_call("sync context\n"); return CUDA_SUCCESS; }
 CUresult cuCtxGetStreamPriorityRange(int *least, int *greatest) { *least = 0; *greatest = -5; return CUDA_SUCCESS; }
 CUresult cuStreamCreate(CUstream *s, unsigned int f) { (void)f; *s = (CUstream)malloc(8); return CUDA_SUCCESS; }
 CUresult cuStreamCreateWithPriority(CUstream *s, unsigned int f, int p) { (void)p; return cuStreamCreate(s, f); }
 CUresult cuStreamDestroy(CUstream s) { (void)s; return CUDA_SUCCESS; }
-CUresult cuStreamSynchronize(CUstream s) { (void)s; return CUDA_SUCCESS; }
+CUresult cuStreamSynchronize(CUstream s) { (void)s; log_call("sync stream\n"); return CUDA_SUCCESS; }
 CUresult cuStreamQuery(CUstream s) { (void)s; return CUDA_SUCCESS; }
 CUresult cuStreamWaitEvent(CUstream s, CUevent e, unsigned int f) { (void)s; (void)e; (void)f; return CUDA_SUCCESS; }
 // An event keeps the launch count at its record; the time between two is 5 µs a launch, so
@@ -104,7 +116,7 @@ CUresult cuStreamWaitEvent(CUstream s, CUevent e, unsigned int f) { (void)s; (vo
 CUresult cuEventCreate(CUevent *e, unsigned int f) { (void)f; *e = (CUevent)calloc(1, sizeof(long)); return CUDA_SUCCESS; }
 CUresult cuEventRecord(CUevent e, CUstream s) { (void)s; *(long *)e = launches; return CUDA_SUCCESS; }
 CUresult cuEventRecordWithFlags(CUevent e, CUstream s, unsigned int f) { (void)f; return cuEventRecord(e, s); }
-CUresult cuEventSynchronize(CUevent e) { (void)e; return CUDA_SUCCESS; }
+CUresult cuEventSynchronize(CUevent e) { (void)e; log_call("sync event\n"); return CUDA_SUCCESS; }
 CUresult cuEventQuery(CUevent e) { (void)e; return CUDA_SUCCESS; }
 CUresult cuEventDestroy(CUevent e) { free(e); return CUDA_SUCCESS; }
 CUresult cuEventElapsedTime(float *ms, CUevent a, CUevent b) {
@@ -115,15 +127,15 @@ CUresult cuEventElapsedTime(float *ms, CUevent a, CUevent b) {
 CUresult cuStreamBeginCapture(CUstream s, CUstreamCaptureMode m) { (void)s; (void)m; return CUDA_ERROR_NOT_SUPPORTED; }
 
 // Device memory is host memory (unified addresses), so copies are plain copies.
-CUresult cuMemAlloc(CUdeviceptr *p, size_t n) { void *m = device_bytes(n); if (!m) return CUDA_ERROR_OUT_OF_MEMORY; *p = (CUdeviceptr)m; return CUDA_SUCCESS; }
+CUresult cuMemAlloc(CUdeviceptr *p, size_t n) { log_call("alloc %zu\n", n); void *m = device_bytes(n); if (!m) return CUDA_ERROR_OUT_OF_MEMORY; *p = (CUdeviceptr)m; return CUDA_SUCCESS; }
 CUresult cuMemAllocAsync(CUdeviceptr *p, size_t n, CUstream s) { (void)s; return cuMemAlloc(p, n); }
-CUresult cuMemFree(CUdeviceptr p) { (void)p; return CUDA_SUCCESS; } // pages stay mapped: sizes are not kept
+CUresult cuMemFree(CUdeviceptr p) { (void)p; log_call("free\n"); return CUDA_SUCCESS; } // pages stay mapped: sizes are not kept
 CUresult cuMemFreeAsync(CUdeviceptr p, CUstream s) { (void)s; return cuMemFree(p); }
-CUresult cuMemAllocHost(void **p, size_t n) { *p = device_bytes(n); return *p ? CUDA_SUCCESS : CUDA_ERROR_OUT_OF_MEMORY; }
+CUresult cuMemAllocHost(void **p, size_t n) { log_call("alloc_host %zu\n", n); *p = device_bytes(n); return *p ? CUDA_SUCCESS : CUDA_ERROR_OUT_OF_MEMORY; }
 CUresult cuMemHostAlloc(void **p, size_t n, unsigned int f) { (void)f; return cuMemAllocHost(p, n); }
-CUresult cuMemFreeHost(void *p) { (void)p; return CUDA_SUCCESS; }
-CUresult cuMemcpyHtoD(CUdeviceptr d, const void *h, size_t n) { memcpy((void *)d, h, n); return CUDA_SUCCESS; }
-CUresult cuMemcpyDtoH(void *h, CUdeviceptr d, size_t n) { memcpy(h, (void *)d, n); return CUDA_SUCCESS; }
+CUresult cuMemFreeHost(void *p) { (void)p; log_call("free_host\n"); return CUDA_SUCCESS; }
+CUresult cuMemcpyHtoD(CUdeviceptr d, const void *h, size_t n) { log_call("htod %zu\n", n); memcpy((void *)d, h, n); return CUDA_SUCCESS; }
+CUresult cuMemcpyDtoH(void *h, CUdeviceptr d, size_t n) { log_call("dtoh %zu\n", n); memcpy(h, (void *)d, n); return CUDA_SUCCESS; }
 CUresult cuMemcpyDtoD(CUdeviceptr a, CUdeviceptr b, size_t n) { memmove((void *)a, (void *)b, n); return CUDA_SUCCESS; }
 CUresult cuMemcpyHtoDAsync(CUdeviceptr d, const void *h, size_t n, CUstream s) { (void)s; return cuMemcpyHtoD(d, h, n); }
 CUresult cuMemcpyDtoHAsync(void *h, CUdeviceptr d, size_t n, CUstream s) { (void)s; return cuMemcpyDtoH(h, d, n); }
@@ -133,6 +145,8 @@ static const char *base(CUmemorytype t, const void *host, CUdeviceptr dev) {
 }
 CUresult cuMemcpy2DAsync(const CUDA_MEMCPY2D *c, CUstream s) {
   (void)s;
+  log_call("copy2d %s %zu\n", c->dstMemoryType == CU_MEMORYTYPE_HOST ? "dtoh" : "htod",
+           (size_t)(c->WidthInBytes * c->Height));
   const char *src = base(c->srcMemoryType, c->srcHost, c->srcDevice);
   char *dst = (char *)base(c->dstMemoryType, c->dstHost, c->dstDevice);
   for (size_t y = 0; y < c->Height; y++)
@@ -176,11 +190,8 @@ CUresult cuLaunchKernel(CUfunction f, unsigned gx, unsigned gy, unsigned gz, uns
                         unsigned bz, unsigned shared, CUstream s, void **params, void **extra) {
   (void)s; (void)params; (void)extra;
   atomic_fetch_add(&launches, 1);
-  const char *path = getenv("STANDIN_LAUNCH_LOG");
-  if (path && !launch_log) launch_log = fopen(path, "a");
-  if (launch_log)
-    fprintf(launch_log, "%s grid %u %u %u block %u %u %u shared %u\n", ((struct function *)f)->name,
-            gx, gy, gz, bx, by, bz, shared);
+  log_call("launch %s grid %u %u %u block %u %u %u shared %u\n", ((struct function *)f)->name,
+           gx, gy, gz, bx, by, bz, shared);
   if ((unsigned long long)bx * by * bz > 1024 || bz > 64 || gy > 65535 || gz > 65535 || shared > 232448)
     return CUDA_ERROR_INVALID_VALUE; // what the real driver refuses
   return CUDA_SUCCESS;
