@@ -9,6 +9,7 @@ pub mod gather;
 pub mod marched_layout;
 pub mod marched_samples;
 pub mod occupancy;
+mod occupancy_march;
 pub mod samplers;
 pub mod sdf_volume;
 pub mod sort_rows;
