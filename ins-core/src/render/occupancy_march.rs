@@ -19,8 +19,10 @@ impl OccupancyGrid {
     /// Marches every ray from its `near` to its `far` (clipped to the box) in steps of
     /// [`OccupancyGrid::step`] (divided by the ray direction's length, so non-unit NDC rays
     /// step evenly; lengthened by [`Contraction::step_scale`] in contracted grids), keeping at
-    /// most `max_per_ray` samples in occupied cells. Each ray's first
-    /// sample is offset by a uniform fraction of a step drawn from `seed` (`None`: half a step).
+    /// most `max_per_ray` samples in occupied cells. Each ray's first sample is offset by a
+    /// uniform fraction of a step drawn from `seed` (`None`: half a step).
+    ///
+    /// [`Contraction::step_scale`]: ins_scene::geometry::Contraction::step_scale
     pub fn march(&self, rays: &Rays, max_per_ray: usize, seed: Option<u64>) -> MarchedSamples {
         let marcher = Marcher {
             grid: self,
