@@ -1,5 +1,6 @@
 //! The VGG-16 feature extractor up to relu4_3, as a Burn module (so it caches in Burn's format).
 
+use burn::backend::DispatchDevice;
 use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::FloatDType;
@@ -87,6 +88,42 @@ impl Vgg16Features {
         Self {
             convs,
             precision: Precision::F32,
+        }
+        .channels_last()
+    }
+
+    /// The same weights, frozen, stored as the GPU backends' convolutions read them: each
+    /// `[out, in, 3, 3]` weight kept contiguous as `[out, 3, 3, in]` and seen through a
+    /// permuted view. On Flex (whose convolutions keep their own packed copy) only frozen.
+    ///
+    /// Why: Burn's CubeCL convolutions work channels-last. Given a contiguous weight, each
+    /// call permutes it and copies it to make its channels contiguous, forward and again in
+    /// the input's gradient (which reads the same layout): twenty copies of weights that never
+    /// change, every stylization step. Through this view the permute finds them in place.
+    pub fn channels_last(self) -> Self {
+        let device = match self.convs.first() {
+            Some(c) => c.weight.val().device(),
+            None => return self.no_grad(),
+        };
+        if matches!(device.clone().inner().as_dispatch(), DispatchDevice::Flex(_)) {
+            return self.no_grad();
+        }
+        let convs = self
+            .convs
+            .into_iter()
+            .map(|c| {
+                let w = c.weight.val().permute([0, 2, 3, 1]).into_data();
+                VggConv {
+                    weight: Param::from_tensor(
+                        Tensor::<4>::from_data(w, &device).permute([0, 3, 1, 2]),
+                    ),
+                    bias: c.bias,
+                }
+            })
+            .collect();
+        Self {
+            convs,
+            precision: self.precision,
         }
         .no_grad()
     }
@@ -178,7 +215,7 @@ impl Vgg {
     /// The same extractor on another device.
     pub fn to_device(&self, device: &Device) -> Self {
         Self {
-            net: self.net.clone().to_device(device).no_grad(),
+            net: self.net.clone().to_device(device).channels_last(),
             preprocess: self.preprocess,
         }
     }
@@ -208,7 +245,7 @@ impl Vgg16Features {
             convs,
             precision: Precision::F32,
         }
-        .no_grad()
+        .channels_last()
     }
 }
 

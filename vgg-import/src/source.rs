@@ -232,6 +232,6 @@ fn load_converted(
     let net = Vgg16Features::zeros(device)
         .try_load_record(record)
         .map_err(|e| cache_err(bpk, e.to_string()))?
-        .no_grad();
+        .channels_last();
     Ok((net, detected))
 }

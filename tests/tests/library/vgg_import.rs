@@ -203,8 +203,10 @@ fn rel_l2(a: &[f32], b: &[f32]) -> f32 {
 /// `--precision f16` on wgpu against f32 on the same adapter, on a small VGG-shaped network
 /// (the fixture's ten 3×3 convolutions, a few channels each) and a 64² crop of the real photo:
 /// the style layers' features and the input gradient of a style loss. An adapter without f16
-/// shaders falls back to f32 and must give the very same features. The real VGG-16 runs the
-/// same check in [`f16_features_on_the_real_network_stay_close_to_f32`], on a GPU.
+/// shaders falls back to f32 and must give the very same features. The f32 run is also held
+/// to Flex's (the weights are stored channels-last on the GPU, `Vgg16Features::channels_last`).
+/// The real VGG-16 runs the same check in
+/// [`f16_features_on_the_real_network_stay_close_to_f32`], on a GPU.
 #[test]
 fn f16_features_on_wgpu_stay_close_to_f32() {
     f16_against_f32_on_wgpu(|device| {
@@ -265,6 +267,25 @@ fn f16_against_f32_on_wgpu(network: fn(&Device) -> Vgg) {
             )
         },
     );
+    // The same network on Flex: the GPU's f32 features and gradient, channels-last weights
+    // and all, are Flex's up to rounding.
+    let flex = Device::flex().autodiff();
+    let x = npy_tensor4(&fixture("vgg/real_input.npy"), &flex).slice([0..1, 0..3, 0..64, 0..64]);
+    let loss = |g: Tensor<3>| {
+        (g.clone() - g.detach().mul_scalar(0.5))
+            .powf_scalar(2.0)
+            .mean()
+    };
+    let (flex_layers, _, flex_grad) = layers_grams_and_gradient(&network(&flex), &x, loss);
+    for (name, (f, (gpu, _))) in vgg_import::VggFeatures::NAMES
+        .iter()
+        .zip(flex_layers.iter().zip(&features))
+    {
+        let d = max_rel_diff(gpu, f, 1e-3);
+        assert!(d < 1e-4, "{name}: wgpu's f32 features differ from Flex's by {d}");
+    }
+    let grad = rel_l2(&gradients.0, &flex_grad);
+    assert!(grad < 1e-4, "wgpu's f32 input gradient differs from Flex's by {grad} (relative L2)");
     if !half {
         eprintln!("this adapter has no f16 shaders: f16 falls back to f32");
         for (a, b) in &features {
