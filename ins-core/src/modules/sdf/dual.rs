@@ -7,7 +7,7 @@ use burn::prelude::*;
 use super::BETA;
 use crate::kernels::dense::dense;
 use crate::kernels::softplus::{softplus, softplus_slope};
-use crate::modules::encoding::FourierEncoding;
+use crate::modules::encoding::{FourierEncoding, octave_pairs};
 
 /// Value and forward-mode tangents of a layer stack: `h [N, D]`, `t [3N, D]` (the three
 /// tangents stacked along rows, tangent k in rows `kN..(k+1)N`).
@@ -74,14 +74,18 @@ pub(super) fn encode_dual(x: Tensor<2>, n_freqs: usize) -> Dual {
     let enc = FourierEncoding::new(n_freqs);
     let d = enc.d_out(3);
     // d/dx of [x, sin(2^j x), cos(2^j x)] elementwise: [1, 2^j cos(2^j x), −2^j sin(2^j x)].
-    let mut parts = vec![Tensor::<2>::ones([n, 3], &device)];
-    for j in 0..n_freqs {
-        let f = (1u64 << j) as f32;
-        let s = x.clone().mul_scalar(f);
-        parts.push(s.clone().cos().mul_scalar(f));
-        parts.push(s.sin().mul_scalar(-f));
-    }
-    let deriv = Tensor::cat(parts, 1);
+    let ones = Tensor::<2>::ones([n, 3], &device);
+    let deriv = if n_freqs == 0 {
+        ones
+    } else {
+        let angles = enc.angles(x.clone());
+        let scales = enc.octaves(&device);
+        let waves = octave_pairs(
+            angles.clone().cos() * scales.clone(),
+            angles.sin() * scales.neg(),
+        );
+        Tensor::cat(vec![ones, waves], 1)
+    };
     // Column c of the encoding belongs to coordinate c mod 3.
     let masks: Vec<f32> = (0..3)
         .flat_map(|k| (0..d).map(move |c| if c % 3 == k { 1.0 } else { 0.0 }))
