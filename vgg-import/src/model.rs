@@ -105,7 +105,10 @@ impl Vgg16Features {
             Some(c) => c.weight.val().device(),
             None => return self.no_grad(),
         };
-        if matches!(device.clone().inner().as_dispatch(), DispatchDevice::Flex(_)) {
+        if matches!(
+            device.clone().inner().as_dispatch(),
+            DispatchDevice::Flex(_)
+        ) {
             return self.no_grad();
         }
         let convs = self

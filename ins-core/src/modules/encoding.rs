@@ -83,7 +83,10 @@ mod tests {
     fn no_octaves_is_the_input_and_the_gradient_is_the_derivative() {
         let d = Device::flex().autodiff();
         let x = Tensor::<2>::from_floats([[0.3, -1.2]], &d);
-        assert_eq!(FourierEncoding::new(0).encode(x.clone()).into_data(), x.clone().into_data());
+        assert_eq!(
+            FourierEncoding::new(0).encode(x.clone()).into_data(),
+            x.clone().into_data()
+        );
         // d/dx of Σ encode(x) = 1 + Σ_k 2^k (cos(2^k x) − sin(2^k x)).
         let x = x.require_grad();
         let g = FourierEncoding::new(3).encode(x.clone()).sum().backward();
@@ -96,7 +99,10 @@ mod tests {
                         f * ((f * v).cos() - (f * v).sin())
                     })
                     .sum::<f32>();
-            assert!((got[i] - want).abs() < 1e-5, "{got:?}: {i} should be {want}");
+            assert!(
+                (got[i] - want).abs() < 1e-5,
+                "{got:?}: {i} should be {want}"
+            );
         }
     }
 }

@@ -282,10 +282,16 @@ fn f16_against_f32_on_wgpu(network: fn(&Device) -> Vgg) {
         .zip(flex_layers.iter().zip(&features))
     {
         let d = max_rel_diff(gpu, f, 1e-3);
-        assert!(d < 1e-4, "{name}: wgpu's f32 features differ from Flex's by {d}");
+        assert!(
+            d < 1e-4,
+            "{name}: wgpu's f32 features differ from Flex's by {d}"
+        );
     }
     let grad = rel_l2(&gradients.0, &flex_grad);
-    assert!(grad < 1e-4, "wgpu's f32 input gradient differs from Flex's by {grad} (relative L2)");
+    assert!(
+        grad < 1e-4,
+        "wgpu's f32 input gradient differs from Flex's by {grad} (relative L2)"
+    );
     if !half {
         eprintln!("this adapter has no f16 shaders: f16 falls back to f32");
         for (a, b) in &features {
