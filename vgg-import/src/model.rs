@@ -1,6 +1,5 @@
 //! The VGG-16 feature extractor up to relu4_3, as a Burn module (so it caches in Burn's format).
 
-use burn::backend::DispatchDevice;
 use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::FloatDType;
@@ -105,10 +104,7 @@ impl Vgg16Features {
             Some(c) => c.weight.val().device(),
             None => return self.no_grad(),
         };
-        if matches!(
-            device.clone().inner().as_dispatch(),
-            DispatchDevice::Flex(_)
-        ) {
+        if ins_conv::kernel_device(&device) {
             return self.no_grad();
         }
         let convs = self

@@ -29,15 +29,8 @@ impl FourierEncoding {
         if self.n_freqs == 0 {
             return x;
         }
-        let angles = self.angles(x.clone());
+        let angles = angles(x.clone(), self.octaves(&x.device()));
         Tensor::cat(vec![x, octave_pairs(angles.clone().sin(), angles.cos())], 1)
-    }
-
-    /// `x·2^k` for every octave k: `[N, d] → [N, n, d]` (exact: a power of two).
-    pub fn angles(&self, x: Tensor<2>) -> Tensor<3> {
-        let [n, d] = x.dims();
-        let octaves = self.octaves(&x.device());
-        x.reshape([n, 1, d]) * octaves
     }
 
     /// `2^k` for every octave k, `[1, n, 1]`.
@@ -45,6 +38,13 @@ impl FourierEncoding {
         let scales: Vec<f32> = (0..self.n_freqs).map(|k| (1u64 << k) as f32).collect();
         Tensor::<1>::from_floats(scales.as_slice(), device).reshape([1, self.n_freqs, 1])
     }
+}
+
+/// `x·2^k` for every octave k, given the [`FourierEncoding::octaves`]: `[N, d] → [N, n, d]`
+/// (exact: a power of two).
+pub fn angles(x: Tensor<2>, octaves: Tensor<3>) -> Tensor<3> {
+    let [n, d] = x.dims();
+    x.reshape([n, 1, d]) * octaves
 }
 
 /// Two `[N, n, d]` tensors as `[N, n·2·d]`: for each octave, `a`'s `d` columns then `b`'s.

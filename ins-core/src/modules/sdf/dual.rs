@@ -7,7 +7,7 @@ use burn::prelude::*;
 use super::BETA;
 use crate::kernels::dense::dense;
 use crate::kernels::softplus::{softplus, softplus_slope};
-use crate::modules::encoding::{FourierEncoding, octave_pairs};
+use crate::modules::encoding::{FourierEncoding, angles, octave_pairs};
 
 /// Value and forward-mode tangents of a layer stack: `h [N, D]`, `t [3N, D]` (the three
 /// tangents stacked along rows, tangent k in rows `kN..(k+1)N`).
@@ -78,8 +78,8 @@ pub(super) fn encode_dual(x: Tensor<2>, n_freqs: usize) -> Dual {
     let deriv = if n_freqs == 0 {
         ones
     } else {
-        let angles = enc.angles(x.clone());
         let scales = enc.octaves(&device);
+        let angles = angles(x.clone(), scales.clone());
         let waves = octave_pairs(
             angles.clone().cos() * scales.clone(),
             angles.sin() * scales.neg(),
