@@ -26,7 +26,7 @@ impl OccupancyGrid {
     pub fn march(&self, rays: &Rays, max_per_ray: usize, seed: Option<u64>) -> MarchedSamples {
         let marcher = Marcher {
             grid: self,
-            blocks: Blocks::of(self, 8),
+            blocks: Blocks::of(self),
             bounds: ins_scene::geometry::Bounds::Aabb {
                 min: Vec3::from(self.min),
                 max: Vec3::from(self.max),
@@ -113,7 +113,6 @@ impl Marcher<'_> {
         let limit = out.len().saturating_add(self.max_per_ray);
         match &g.contraction {
             None => {
-                let r = g.resolution as usize;
                 // Sample k sits at `t0 + (offset + k)·dt`; empty blocks are crossed in one jump.
                 let mut k = 0usize;
                 loop {
@@ -122,15 +121,16 @@ impl Marcher<'_> {
                         break;
                     }
                     if let Some(c) = g.cell_coords(o + d * t, self.min, self.per_unit) {
-                        if g.occupied[c[0] + c[1] * r + c[2] * r * r] {
+                        if self.blocks.cell(c) {
                             out.push((t, dt));
                         } else if !self.blocks.occupied_at(c) {
                             let exit = self.blocks.exit_at(c, o, d);
-                            // One step short of the exit: every step skipped lies a cell
-                            // inside the block, whatever the rounding.
-                            let last = ((exit - t0) / dt - offset).floor() - 1.0;
-                            if last > k as f32 + 1.0 {
-                                k = last as usize;
+                            // One step short of the exit, floor(v) − 1: every step skipped
+                            // lies a cell inside the block, whatever the rounding. (For v ≥ 0
+                            // the floor is the truncation `as` makes, which needs no call.)
+                            let v = (exit - t0) / dt - offset;
+                            if v >= 0.0 && v as usize > k + 2 {
+                                k = v as usize - 1;
                                 continue;
                             }
                         }
@@ -143,7 +143,8 @@ impl Marcher<'_> {
                 while t < t1 && out.len() < limit {
                     let p = o + d * t;
                     let step = dt * c.step_scale(p);
-                    if g.is_occupied(c.apply(p)) {
+                    let cell = g.cell_coords(c.apply(p), self.min, self.per_unit);
+                    if cell.is_some_and(|cell| self.blocks.cell(cell)) {
                         out.push((t, step));
                     }
                     t += step;
