@@ -7,6 +7,8 @@
 // memory a block), named so that ins-core's first-kernel probe knows not to check its sum.
 #define _GNU_SOURCE
 #include <cuda.h>
+#include <execinfo.h>
+#include <link.h>
 #include <stdatomic.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -26,6 +28,35 @@ static void log_call(const char *fmt, ...) {
   va_start(args, fmt);
   vfprintf(launch_log, fmt, args);
   va_end(args);
+}
+
+// With $STANDIN_BACKTRACE also set, each launch whose kernel name contains its value (":"
+// matches every one) is followed by the return addresses on its stack that lie in the program
+// itself, one "  bt OFFSET" line each (hex, from the program's load address), innermost first:
+// scripts/cuda_standin/launch_sites.py names them (addr2line) to tell which line of the
+// workspace asked for each kernel.
+static uintptr_t exe_bias, exe_lo = UINTPTR_MAX, exe_hi;
+static int first_object(struct dl_phdr_info *info, size_t size, void *data) {
+  (void)size; (void)data;
+  exe_bias = info->dlpi_addr;
+  for (int i = 0; i < info->dlpi_phnum; i++)
+    if (info->dlpi_phdr[i].p_type == PT_LOAD && (info->dlpi_phdr[i].p_flags & PF_X)) {
+      uintptr_t lo = exe_bias + info->dlpi_phdr[i].p_vaddr;
+      if (lo < exe_lo) exe_lo = lo;
+      if (lo + info->dlpi_phdr[i].p_memsz > exe_hi) exe_hi = lo + info->dlpi_phdr[i].p_memsz;
+    }
+  return 1; // the program is the first object listed
+}
+static void log_backtrace(const char *kernel) {
+  const char *pattern = getenv("STANDIN_BACKTRACE");
+  if (!pattern || !launch_log || !strstr(kernel, pattern)) return;
+  if (!exe_hi) dl_iterate_phdr(first_object, NULL);
+  void *frames[64];
+  int n = backtrace(frames, 64);
+  for (int i = 0; i < n; i++) {
+    uintptr_t a = (uintptr_t)frames[i];
+    if (a >= exe_lo && a < exe_hi) fprintf(launch_log, "  bt %lx\n", (unsigned long)(a - exe_bias));
+  }
 }
 
 static void *device_bytes(size_t size) {
@@ -192,6 +223,7 @@ CUresult cuLaunchKernel(CUfunction f, unsigned gx, unsigned gy, unsigned gz, uns
   atomic_fetch_add(&launches, 1);
   log_call("launch %s grid %u %u %u block %u %u %u shared %u\n", ((struct function *)f)->name,
            gx, gy, gz, bx, by, bz, shared);
+  log_backtrace(((struct function *)f)->name);
   if ((unsigned long long)bx * by * bz > 1024 || bz > 64 || gy > 65535 || gz > 65535 || shared > 232448)
     return CUDA_ERROR_INVALID_VALUE; // what the real driver refuses
   return CUDA_SUCCESS;

@@ -6,7 +6,7 @@ use burn::prelude::*;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-use super::sort_rows::sort_rows;
+use super::merge_rows::merge_rows;
 
 /// `n` uniforms in `[0, 1)` from `seed`, as an `[rows, cols]` tensor.
 pub fn uniforms(rows: usize, cols: usize, seed: u64, device: &Device) -> Tensor<2> {
@@ -46,7 +46,7 @@ pub fn deltas(t: Tensor<2>, far: Tensor<1>) -> Tensor<2> {
 /// the coarse samples and sorted: `[R, S + n]`. No gradient flows through the result.
 pub fn hierarchical(t: Tensor<2>, weights: Tensor<2>, n: usize, seed: Option<u64>) -> Tensor<2> {
     let fine = draw_from_weights(t.clone(), weights, n, seed);
-    sort_rows(Tensor::cat(vec![t.detach(), fine], 1))
+    merge_rows(t.detach(), fine)
 }
 
 /// The `n` new distances of [`hierarchical`] alone, in increasing order: `[R, n]`.

@@ -10,9 +10,9 @@ use burn::prelude::*;
 use ins_core::kernels::flex::on_flex;
 use ins_core::render::beyond_sphere::render_beyond_unit_sphere;
 use ins_core::render::gather::select_parallel;
+use ins_core::render::merge_rows::{merge_rows, merge_rows_with_indices};
 use ins_core::render::samplers::{draw_from_weights, stratified};
 use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
-use ins_core::render::sort_rows::{sort_rows, sort_rows_with_indices};
 use ins_scene::geometry::{Bounds, Vec3};
 use ins_scene::rays::{Rays, flatten};
 use serde::{Deserialize, Serialize};
@@ -254,11 +254,11 @@ fn fine_positions(
     for round in 0..last {
         let drawn = draw(round, &z, &f);
         let f_drawn = sdf_along(model, origins, dirs, drawn.clone());
-        let (sorted, order) = sort_rows_with_indices(Tensor::cat(vec![z, drawn], 1));
+        let (sorted, order) = merge_rows_with_indices(z, drawn);
         f = Tensor::cat(vec![f, f_drawn], 1).gather(1, order);
         z = sorted;
     }
-    sort_rows(Tensor::cat(vec![kept, draw(last, &z, &f)], 1))
+    merge_rows(kept, draw(last, &z, &f))
 }
 
 /// Renders `rays` as a volume under each style of `codes` (`[S, n]`, or `None`), on `device`

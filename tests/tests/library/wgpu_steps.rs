@@ -323,35 +323,40 @@ fn fine_samples_drawn_from_weights_move_only_by_their_cdfs_rounding_on_wgpu() {
     );
 }
 
-/// Samples sorted along their rays on the device (CubeCL has no sort kernel; the rows are
-/// ranked by counting instead of read back) come out as the host sorts them, each index
-/// pointing at its value: rows of 80 with ties, as IDR's volume merges its drawn samples.
+/// Two sets of samples merged along their rays on the device (CubeCL has no sort kernel; each
+/// value's place is counted instead of read back) come out as the host sorts them, each index
+/// pointing at its value: rows of 40 + 40 with ties within and across the sets, as IDR's volume
+/// merges its drawn samples into its coarse ones.
 #[test]
-fn ray_samples_sort_on_wgpu_as_on_the_host() {
-    use ins_core::render::sort_rows::sort_rows_with_indices;
+fn ray_samples_merge_on_wgpu_as_the_host_sorts() {
+    use ins_core::render::merge_rows::merge_rows_with_indices;
     let (rows, k) = (64usize, 80usize);
-    // Values on a coarse lattice (ties in every row) with a sorted first half, as a merge sees.
-    let x: Vec<f32> = (0..rows * k)
-        .map(|i| {
-            let (r, c) = (i / k, i % k);
-            if c < k / 2 {
-                c as f32 * 0.25
-            } else {
-                ((c * 37 + r * 11) % 53) as f32 * 0.125
-            }
+    // Values on a coarse lattice (ties in every row), each half sorted.
+    let x: Vec<f32> = (0..rows)
+        .flat_map(|r| {
+            let a = (0..k / 2).map(|c| c as f32 * 0.25);
+            let mut b: Vec<f32> = (k / 2..k)
+                .map(|c| ((c * 37 + r * 11) % 53) as f32 * 0.125)
+                .collect();
+            b.sort_by(f32::total_cmp);
+            a.chain(b).collect::<Vec<_>>()
         })
         .collect();
     let on = {
         let x = x.clone();
         move |device: &Device| -> (Vec<f32>, Vec<i64>) {
             let t = Tensor::<1>::from_floats(x.as_slice(), device).reshape([rows, k]);
-            let (sorted, order) = sort_rows_with_indices(t);
+            let (a, b) = (
+                t.clone().slice([0..rows, 0..k / 2]),
+                t.slice([0..rows, k / 2..k]),
+            );
+            let (sorted, order) = merge_rows_with_indices(a, b);
             let order = order.into_data().convert::<i64>();
             (values(sorted), order.try_to_vec::<i64>().unwrap())
         }
     };
     let (flex, _) = on(&Device::flex());
-    let (wgpu, order) = ins_tests::within(ins_tests::WGPU_LIMIT_S, "sorting rows", move || {
+    let (wgpu, order) = ins_tests::within(ins_tests::WGPU_LIMIT_S, "merging rows", move || {
         on(&BackendChoice::Wgpu.device())
     });
     assert_eq!(wgpu, flex, "the sorted rows differ from the host's");
