@@ -90,7 +90,7 @@ mod tests {
         // d/dx of Σ encode(x) = 1 + Σ_k 2^k (cos(2^k x) − sin(2^k x)).
         let x = x.require_grad();
         let g = FourierEncoding::new(3).encode(x.clone()).sum().backward();
-        let got = x.grad(&g).unwrap().into_data().to_vec::<f32>().unwrap();
+        let got = x.grad(&g).unwrap().into_data().try_to_vec::<f32>().unwrap();
         for (i, v) in [0.3f32, -1.2].iter().enumerate() {
             let want: f32 = 1.0
                 + (0..3)
