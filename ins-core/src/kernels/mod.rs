@@ -11,10 +11,12 @@
 //!   MLP's layers fused for renders); [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
 //!   activation and its slope; [`gram`]: Gram matrices.
 //! - [`adam`]: Adam's step fused into one pass over each parameter.
+//! - [`composite`]: volume compositing as one kernel a pass on the GPU backends.
 //! - [`hash_grid`]: the multiresolution hash encoding on slices, as CubeCL kernels, and as a
 //!   Burn op with both backwards.
 
 pub mod adam;
+pub mod composite;
 pub mod dense;
 pub mod dense_bf16;
 pub mod dense_chain;

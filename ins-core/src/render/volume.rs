@@ -8,6 +8,8 @@
 
 use burn::prelude::*;
 
+use crate::kernels::composite::op::{composite_op, op_device};
+
 /// What compositing gives per ray.
 #[derive(Debug, Clone)]
 pub struct Composite {
@@ -17,8 +19,21 @@ pub struct Composite {
     pub depth: Tensor<1>,
     /// Opacity `Σ wᵢ`, `[R]`.
     pub opacity: Tensor<1>,
-    /// Per-sample weights `[R, S]`.
-    pub weights: Tensor<2>,
+    /// The densities and spacings, detached, for [`Composite::weights`].
+    sigma: Tensor<2>,
+    delta: Tensor<2>,
+    /// The weights when the composite computed them on the way (ordinary ops), detached.
+    computed: Option<Tensor<2>>,
+}
+
+impl Composite {
+    /// Per-sample weights `[R, S]`, without gradient: they choose where to sample next.
+    pub fn weights(&self) -> Tensor<2> {
+        match &self.computed {
+            Some(w) => w.clone(),
+            None => weights(self.sigma.clone(), self.delta.clone()),
+        }
+    }
 }
 
 /// Per-sample compositing weights from densities `sigma [R, S]` (≥ 0) and spacings `delta [R, S]`.
@@ -44,6 +59,10 @@ pub fn in_front_of_opaque(sigma: Tensor<2>, delta: Tensor<2>, min_transmittance:
 /// Composites samples: `sigma [R, S]`, `rgb [R, S, 3]`, `t [R, S]`, `delta [R, S]`; the part of
 /// each ray that nothing stops shows `background` (white for NeRF-synthetic scenes, black
 /// elsewhere).
+///
+/// On the GPU backends this is one kernel forward and one backward
+/// ([`crate::kernels::composite`]) when `t` and `delta` take no gradient (they never do in a
+/// render: they are the samples' places); elsewhere, ordinary ops.
 pub fn composite(
     sigma: Tensor<2>,
     rgb: Tensor<3>,
@@ -51,21 +70,37 @@ pub fn composite(
     delta: Tensor<2>,
     background: [f32; 3],
 ) -> Composite {
-    let [r, _] = sigma.dims();
-    let w = weights(sigma, delta);
+    let [r, s] = sigma.dims();
+    let device = sigma.device();
+    let bg = Tensor::<1>::from_floats(background, &device);
+    let f32s = [sigma.dtype(), rgb.dtype(), t.dtype(), delta.dtype()]
+        .iter()
+        .all(|d| *d == burn::tensor::DType::F32);
+    if s > 0 && f32s && op_device(&device) && !t.is_tracked() && !delta.is_tracked() {
+        let out = composite_op(sigma.clone(), rgb, t, delta.clone(), bg);
+        return Composite {
+            rgb: out.clone().slice([0..r, 0..3]),
+            depth: out.clone().slice([0..r, 3..4]).reshape([r]),
+            opacity: out.slice([0..r, 4..5]).reshape([r]),
+            sigma: sigma.detach(),
+            delta: delta.detach(),
+            computed: None,
+        };
+    }
+    let w = weights(sigma.clone(), delta.clone());
     let colour: Tensor<2> = (w.clone().unsqueeze_dim::<3>(2) * rgb)
         .sum_dim(1)
         .reshape([r, 3]);
     let opacity: Tensor<1> = w.clone().sum_dim(1).reshape([r]);
     let depth: Tensor<1> = (w.clone() * t).sum_dim(1).reshape([r]);
-    let device = colour.device();
-    let bg = Tensor::<1>::from_floats(background, &device).reshape([1, 3]);
     let rest = opacity.clone().neg().add_scalar(1.0).reshape([r, 1]);
     Composite {
-        rgb: colour + rest * bg,
+        rgb: colour + rest * bg.reshape([1, 3]),
         depth,
         opacity,
-        weights: w,
+        sigma: sigma.detach(),
+        delta: delta.detach(),
+        computed: Some(w.detach()),
     }
 }
 

@@ -325,12 +325,7 @@ fn render_coarse_fine(
         deltas(t_c.clone(), far.clone()),
         background,
     );
-    let t_f = hierarchical(
-        t_c,
-        c.weights.clone(),
-        n_fine,
-        seed.map(|s| s ^ 0x5bd1_e995),
-    );
+    let t_f = hierarchical(t_c, c.weights(), n_fine, seed.map(|s| s ^ 0x5bd1_e995));
     let total = n_coarse + n_fine;
     let x = points(&t_f);
     let ev = model.evaluate(x.clone(), view(&model.field.color, total), codes);

@@ -407,6 +407,94 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
     assert_eq!(wgpu, flex, "the picks differ from the host's");
 }
 
+/// Compositing as one kernel forward and one backward (the GPU path) gives flex's ordinary ops'
+/// colours, depths, opacities, weights and the gradients of densities and colours: rays that
+/// turn opaque, rays nearly empty, rays ending in padding (δ = 0), a white background, and a
+/// loss that weighs all three outputs.
+#[test]
+fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
+    use ins_core::render::volume::composite;
+    let (rays, samples) = (37usize, 45usize);
+    let mut sigma = Vec::new();
+    let (mut t, mut delta, mut rgb, mut probe) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for r in 0..rays {
+        let live = samples - (r * 7) % 20;
+        for k in 0..samples {
+            let x = (r * 31 + k * 17) % 23;
+            sigma.push(match r % 3 {
+                0 => 40.0 * x as f32,
+                1 => 0.05 * x as f32,
+                _ => (x as f32 - 11.0).max(0.0) * 3.0,
+            });
+            t.push(2.0 + 0.09 * k as f32 + 0.001 * r as f32);
+            delta.push(if k < live { 0.09 } else { 0.0 });
+            rgb.extend([
+                x as f32 / 23.0,
+                (k % 5) as f32 / 5.0,
+                0.5 + 0.01 * (r % 9) as f32,
+            ]);
+        }
+        probe.extend([
+            (r % 4) as f32 - 1.5,
+            0.3,
+            -0.7,
+            0.05 * (r % 3) as f32,
+            1.0 - 0.1 * (r % 5) as f32,
+        ]);
+    }
+    let on = move |device: &Device| -> Vec<Vec<f32>> {
+        let device = device.clone().autodiff();
+        let field =
+            |v: &[f32], shape: [usize; 2]| Tensor::<1>::from_floats(v, &device).reshape(shape);
+        let sigma = field(&sigma, [rays, samples]).require_grad();
+        let rgb = Tensor::<1>::from_floats(rgb.as_slice(), &device)
+            .reshape([rays, samples, 3])
+            .require_grad();
+        let c = composite(
+            sigma.clone(),
+            rgb.clone(),
+            field(&t, [rays, samples]),
+            field(&delta, [rays, samples]),
+            [1.0, 1.0, 1.0],
+        );
+        let probe = field(&probe, [rays, 5]);
+        let outputs = Tensor::cat(
+            vec![
+                c.rgb.clone(),
+                c.depth.clone().reshape([rays, 1]),
+                c.opacity.clone().reshape([rays, 1]),
+            ],
+            1,
+        );
+        let grads = (outputs.clone() * probe).sum().backward();
+        vec![
+            values(outputs),
+            values(c.weights()),
+            values(sigma.grad(&grads).unwrap()),
+            values(rgb.grad(&grads).unwrap().reshape([rays, samples * 3])),
+        ]
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "compositing", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    for (i, what) in ["outputs", "weights", "density gradient", "colour gradient"]
+        .iter()
+        .enumerate()
+    {
+        let err = max_rel_diff(&wgpu[i], &flex[i], 1e-6);
+        eprintln!("compositing in one kernel, {what}: {err:e} relative to the largest");
+        assert!(err < 1e-4, "{what}: {err:e} relative to the largest");
+    }
+    // The opaque rays reach full opacity; the padding takes no gradient.
+    assert!(flex[0][4] > 0.999, "ray 0 opaque: {}", flex[0][4]);
+    assert_eq!(
+        wgpu[2][samples - 1 + samples * 4],
+        0.0,
+        "padding of ray 4 moved"
+    );
+}
+
 /// IDR's tracer with its rounds on the device (the GPU path) finds on wgpu the hits, depths and
 /// closest approaches the host's tracer finds: a box (faces, edges) whose field overstates
 /// distances, so the march brackets some rays and the search finds others; near and clear
