@@ -174,9 +174,8 @@ impl StyleTargets {
                     std::array::from_fn(|l| {
                         (radii[l] < UNGUIDED_RADIUS).then(|| {
                             let f = layers[l];
-                            let [b, c, h, w] = f.dims();
-                            let row = i.min(b - 1);
-                            let fi = f.clone().detach().slice([row..row + 1]).reshape([c, h * w]);
+                            let [b, _, _, _] = f.dims();
+                            let fi = batch_row(f.clone().detach(), i.min(b - 1));
                             PhotoGuide {
                                 unit: unit_columns(fi),
                                 radius: radii[l],
@@ -199,8 +198,7 @@ impl StyleTargets {
                 let mut total: Option<Tensor<1>> = None;
                 for (l, f) in layers.iter().enumerate() {
                     for (i, painting) in paintings.iter().enumerate() {
-                        let [_, c, h, w] = f.dims();
-                        let fi = (*f).clone().slice([i..i + 1]).reshape([c, h * w]);
+                        let fi = batch_row((*f).clone(), i);
                         let photo = guide.and_then(|g| g[i][l].as_ref());
                         let term = nnfm_among(fi, painting[l].clone(), photo)
                             .div_scalar(paintings.len() as f32);
@@ -226,6 +224,18 @@ impl StyleTargets {
             }
         }
     }
+}
+
+/// Row `i` of a batch of feature maps `[B, C, H, W]` as `[C, H·W]`; a batch of one is taken
+/// whole, not sliced (a slice is a copy forward and a zeroed copy backward on the GPU).
+fn batch_row(features: Tensor<4>, i: usize) -> Tensor<2> {
+    let [b, c, h, w] = features.dims();
+    let row = if b == 1 && i == 0 {
+        features
+    } else {
+        features.slice([i..i + 1])
+    };
+    row.reshape([c, h * w])
 }
 
 /// For each column of `features [C, N]`, the column of `painting [C, M]` (unit columns) with
