@@ -42,7 +42,7 @@ import time
 # took 164 s against 514 s cold, AMD EPYC Zen 3). Each module keeps a process of its own, so
 # that the CPU lane, once its own jobs are done, compiles the next one on the other core (the
 # four library modules in one process took 2401 s there, on one core).
-LAVAPIPE = ["wgpu_steps", "backends", "vgg_import", "hash_grid", "wgpu_cli"]
+LAVAPIPE = ["wgpu_steps", "wgpu_render_ops", "backends", "vgg_import", "hash_grid", "wgpu_cli"]
 
 # The modules whose tests share one wgpu device inside their process run one test at a time.
 # Two test threads on one lavapipe device gave intermittently different results (wgpu_steps:
@@ -51,7 +51,7 @@ LAVAPIPE = ["wgpu_steps", "backends", "vgg_import", "hash_grid", "wgpu_cli"]
 # session; cause not found). The CLI and the viewer drive a device from one thread. Lavapipe
 # spreads each kernel over both cores anyway: wgpu_steps took 93-98 s one at a time against
 # 91-99 s two at a time.
-ONE_AT_A_TIME = {"wgpu_steps", "backends", "vgg_import", "hash_grid"}
+ONE_AT_A_TIME = {"wgpu_steps", "wgpu_render_ops", "backends", "vgg_import", "hash_grid"}
 
 # The slowest CPU programs, slowest first (same machine, beside the lavapipe lane): starting
 # them first keeps the last minutes from being one long program alone.

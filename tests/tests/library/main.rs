@@ -20,4 +20,5 @@ mod stylize2d;
 mod surface_points;
 mod trainer;
 mod vgg_import;
+mod wgpu_render_ops;
 mod wgpu_steps;

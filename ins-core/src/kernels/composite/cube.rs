@@ -112,9 +112,26 @@ fn backward_kernel(
     }
 }
 
-fn contiguous_f32(t: CubeTensor, what: &str) -> CubeTensor {
-    assert_eq!(t.dtype, DType::F32, "compositing runs in f32 ({what})");
-    into_contiguous(t)
+/// The five inputs both kernels read, `[σ, c, t, δ, background]`, as contiguous f32.
+fn inputs(
+    sigma: CubeTensor,
+    rgb: CubeTensor,
+    t: CubeTensor,
+    delta: CubeTensor,
+    background: CubeTensor,
+) -> [CubeTensor; 5] {
+    let tensors = [sigma, rgb, t, delta, background];
+    let names = [
+        "densities",
+        "colours",
+        "distances",
+        "spacings",
+        "background",
+    ];
+    for (x, name) in tensors.iter().zip(names) {
+        assert_eq!(x.dtype, DType::F32, "compositing runs in f32 ({name})");
+    }
+    tensors.map(into_contiguous)
 }
 
 fn empty_like(t: &CubeTensor, shape: impl Into<Shape>) -> CubeTensor {
@@ -136,22 +153,16 @@ pub fn forward(
     background: CubeTensor,
 ) -> CubeTensor {
     let rays = sigma.meta.shape()[0];
-    let sigma = contiguous_f32(sigma, "densities");
     let out = empty_like(&sigma, [rays, OUTPUTS]);
     if rays == 0 {
         return out;
     }
-    let (count, dim) = grid(&sigma, rays);
+    let (client, (count, dim)) = (sigma.client.clone(), grid(&sigma, rays));
+    let [sigma, rgb, t, delta, background] =
+        inputs(sigma, rgb, t, delta, background).map(|x| x.into_buffer_arg());
+    let output = out.clone().into_buffer_arg();
     forward_kernel::launch(
-        &sigma.client.clone(),
-        count,
-        dim,
-        sigma.into_buffer_arg(),
-        contiguous_f32(rgb, "colours").into_buffer_arg(),
-        contiguous_f32(t, "distances").into_buffer_arg(),
-        contiguous_f32(delta, "spacings").into_buffer_arg(),
-        contiguous_f32(background, "background").into_buffer_arg(),
-        out.clone().into_buffer_arg(),
+        &client, count, dim, sigma, rgb, t, delta, background, output,
     );
     out
 }
@@ -166,23 +177,29 @@ pub fn backward(
     grad: CubeTensor,
 ) -> (CubeTensor, CubeTensor) {
     let [rays, samples] = [sigma.meta.shape()[0], sigma.meta.shape()[1]];
-    let sigma = contiguous_f32(sigma, "densities");
     let grad_sigma = empty_like(&sigma, [rays, samples]);
     let grad_rgb = empty_like(&sigma, [rays, samples, 3]);
     if rays == 0 || samples == 0 {
         return (grad_sigma, grad_rgb);
     }
-    let (count, dim) = grid(&sigma, rays);
+    assert_eq!(
+        grad.dtype,
+        DType::F32,
+        "compositing runs in f32 (upstream gradient)"
+    );
+    let (client, (count, dim)) = (sigma.client.clone(), grid(&sigma, rays));
+    let [sigma, rgb, t, delta, background] =
+        inputs(sigma, rgb, t, delta, background).map(|x| x.into_buffer_arg());
     backward_kernel::launch(
-        &sigma.client.clone(),
+        &client,
         count,
         dim,
-        sigma.into_buffer_arg(),
-        contiguous_f32(rgb, "colours").into_buffer_arg(),
-        contiguous_f32(t, "distances").into_buffer_arg(),
-        contiguous_f32(delta, "spacings").into_buffer_arg(),
-        contiguous_f32(background, "background").into_buffer_arg(),
-        contiguous_f32(grad, "upstream gradient").into_buffer_arg(),
+        sigma,
+        rgb,
+        t,
+        delta,
+        background,
+        into_contiguous(grad).into_buffer_arg(),
         grad_sigma.clone().into_buffer_arg(),
         grad_rgb.clone().into_buffer_arg(),
     );

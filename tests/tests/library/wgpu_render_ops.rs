@@ -1,0 +1,374 @@
+//! Single rendering operations whose GPU path differs from the CPU's, each on wgpu (Mesa's
+//! lavapipe where there is no GPU) against flex or the host: the hierarchical sampler's draws,
+//! ray samples merged instead of sorted, the smoothness term's picks, compositing in one
+//! kernel, sphere tracing with its rounds on the device, a learned background fitted on the
+//! device. The training steps they take part in are compared whole in `wgpu_steps.rs`. Each
+//! wgpu call runs under a timeout, so a hang fails the test instead of the suite.
+
+use burn::prelude::*;
+use ins_core::backend::BackendChoice;
+use ins_tests::{max_rel_diff, values};
+
+/// NeuS's and NeRF's hierarchical sampler draws the same distances on wgpu as on flex, up to
+/// what the rounding of the CDF's running sum allows: a sample in a bin of probability `p`
+/// moves by at most the bin's width times that rounding over `p`. A sample put in the wrong
+/// bin, or at the wrong place in its bin, moves by far more. Checked against the same sampler
+/// evaluated on the host in f64.
+#[test]
+fn fine_samples_drawn_from_weights_move_only_by_their_cdfs_rounding_on_wgpu() {
+    use ins_core::render::samplers::draw_from_weights;
+    let (rows, s, n) = (48usize, 40usize, 24usize);
+    let seed = 11u64;
+    // Distances spread unevenly over [1, 3]; a sharp bump of weight per ray (a surface), two
+    // rays with no weight at all (they see nothing).
+    let mut t = vec![0f32; rows * s];
+    let mut w = vec![0f32; rows * s];
+    for r in 0..rows {
+        for k in 0..s {
+            let x = k as f32 / (s - 1) as f32;
+            t[r * s + k] = 1.0 + 2.0 * x * x.sqrt();
+            let centre = 0.2 + 0.6 * r as f32 / rows as f32;
+            w[r * s + k] = if r < 2 {
+                0.0
+            } else {
+                (-((x - centre) / 0.03).powi(2)).exp()
+            };
+        }
+    }
+    let on = {
+        let (t, w) = (t.clone(), w.clone());
+        move |device: &Device| -> Vec<f32> {
+            let tt = Tensor::<1>::from_floats(t.as_slice(), device).reshape([rows, s]);
+            let ww = Tensor::<1>::from_floats(w.as_slice(), device).reshape([rows, s]);
+            values(draw_from_weights(tt, ww, n, Some(seed)))
+        }
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(
+        ins_tests::WGPU_LIMIT_S,
+        "the hierarchical sampler",
+        move || on(&BackendChoice::Wgpu.device()),
+    );
+    // The host's f64 version of the same sampler, and each sample's allowed movement.
+    let u = values(ins_core::render::samplers::uniforms(
+        rows,
+        n,
+        seed,
+        &Device::flex(),
+    ));
+    let rounding = 4.0 * s as f64 * f64::from(f32::EPSILON);
+    let mut worst = 0f64;
+    for r in 0..rows {
+        let mids: Vec<f64> = (0..s - 1)
+            .map(|k| 0.5 * f64::from(t[r * s + k] + t[r * s + k + 1]))
+            .collect();
+        let pdf: Vec<f64> = (1..s - 1).map(|k| f64::from(w[r * s + k]) + 1e-5).collect();
+        let total: f64 = pdf.iter().sum();
+        let mut cdf = vec![0f64];
+        for p in &pdf {
+            cdf.push(cdf.last().unwrap() + p / total);
+        }
+        for j in 0..n {
+            let uj = ((j as f64 + f64::from(u[r * n + j])) / n as f64).min(1.0 - 1e-6);
+            let bin = cdf.iter().rposition(|&c| c <= uj).unwrap().min(s - 3);
+            let p = cdf[bin + 1] - cdf[bin];
+            let width = mids[bin + 1] - mids[bin];
+            let expected = mids[bin] + ((uj - cdf[bin]) / p).clamp(0.0, 1.0) * width;
+            let allowed = width * (rounding / p).min(1.0) + 1e-5;
+            for (backend, got) in [("flex", &flex), ("wgpu", &wgpu)] {
+                let d = (f64::from(got[r * n + j]) - expected).abs();
+                worst = worst.max(d / allowed);
+                assert!(
+                    d <= allowed,
+                    "ray {r}, sample {j} on {backend}: {} where the host has {expected} \
+                     (bin {bin} of probability {p:e}, allowed {allowed:e})",
+                    got[r * n + j]
+                );
+            }
+        }
+    }
+    eprintln!(
+        "the hierarchical sampler: worst movement {worst:.3} of what its CDF's rounding allows"
+    );
+}
+
+/// Two sets of samples merged along their rays on the device (CubeCL has no sort kernel; each
+/// value's place is counted instead of read back) come out as the host sorts them, each index
+/// pointing at its value: rows of 40 + 40 with ties within and across the sets, as IDR's volume
+/// merges its drawn samples into its coarse ones.
+#[test]
+fn ray_samples_merge_on_wgpu_as_the_host_sorts() {
+    use ins_core::render::merge_rows::merge_rows_with_indices;
+    let (rows, k) = (64usize, 80usize);
+    // Values on a coarse lattice (ties in every row), each half sorted.
+    let x: Vec<f32> = (0..rows)
+        .flat_map(|r| {
+            let a = (0..k / 2).map(|c| c as f32 * 0.25);
+            let mut b: Vec<f32> = (k / 2..k)
+                .map(|c| ((c * 37 + r * 11) % 53) as f32 * 0.125)
+                .collect();
+            b.sort_by(f32::total_cmp);
+            a.chain(b).collect::<Vec<_>>()
+        })
+        .collect();
+    let on = {
+        let x = x.clone();
+        move |device: &Device| -> (Vec<f32>, Vec<i64>) {
+            let t = Tensor::<1>::from_floats(x.as_slice(), device).reshape([rows, k]);
+            let (a, b) = (
+                t.clone().slice([0..rows, 0..k / 2]),
+                t.slice([0..rows, k / 2..k]),
+            );
+            let (sorted, order) = merge_rows_with_indices(a, b);
+            let order = order.into_data().convert::<i64>();
+            (values(sorted), order.try_to_vec::<i64>().unwrap())
+        }
+    };
+    let (flex, _) = on(&Device::flex());
+    let (wgpu, order) = ins_tests::within(ins_tests::WGPU_LIMIT_S, "merging rows", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    assert_eq!(wgpu, flex, "the sorted rows differ from the host's");
+    for r in 0..rows {
+        let mut seen = vec![false; k];
+        for j in 0..k {
+            let from = order[r * k + j] as usize;
+            assert!(
+                from < k && !seen[from],
+                "row {r}: column {from} twice or outside"
+            );
+            seen[from] = true;
+            assert_eq!(x[r * k + from], wgpu[r * k + j], "row {r}, place {j}");
+        }
+    }
+}
+
+/// The smoothness term's picks among the samples seen, made on the device, are the host's
+/// exactly (integer arithmetic): with fewer flagged than picks and with more.
+#[test]
+fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
+    use ins_core::render::flagged_picks::pick_flagged;
+    let flags: Vec<f32> = (0..3000)
+        .map(|j| (j % 7 == 0 || j % 11 == 3) as u8 as f32)
+        .collect();
+    let on = move |device: &Device| -> Vec<(Vec<i64>, Vec<f32>)> {
+        [64, 1024]
+            .into_iter()
+            .map(|k| {
+                let (index, weight) =
+                    pick_flagged(Tensor::<1>::from_floats(flags.as_slice(), device), k, 5);
+                let index = index.into_data().convert::<i64>();
+                (index.try_to_vec::<i64>().unwrap(), values(weight))
+            })
+            .collect()
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(
+        ins_tests::WGPU_LIMIT_S,
+        "picking flagged samples",
+        move || on(&BackendChoice::Wgpu.device()),
+    );
+    assert_eq!(
+        flex[1].1.iter().sum::<f32>(),
+        663.0,
+        "all 663 flagged, then fillers"
+    );
+    assert_eq!(wgpu, flex, "the picks differ from the host's");
+}
+
+/// Compositing as one kernel forward and one backward (the GPU path) gives flex's ordinary ops'
+/// colours, depths, opacities, weights and the gradients of densities and colours: rays that
+/// turn opaque, rays nearly empty, rays ending in padding (δ = 0), a white background, and a
+/// loss that weighs all three outputs.
+#[test]
+fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
+    use ins_core::render::volume::composite;
+    let (rays, samples) = (37usize, 45usize);
+    let mut sigma = Vec::new();
+    let (mut t, mut delta, mut rgb, mut probe) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for r in 0..rays {
+        let live = samples - (r * 7) % 20;
+        for k in 0..samples {
+            let x = (r * 31 + k * 17) % 23;
+            sigma.push(match r % 3 {
+                0 => 40.0 * x as f32,
+                1 => 0.05 * x as f32,
+                _ => (x as f32 - 11.0).max(0.0) * 3.0,
+            });
+            t.push(2.0 + 0.09 * k as f32 + 0.001 * r as f32);
+            delta.push(if k < live { 0.09 } else { 0.0 });
+            rgb.extend([
+                x as f32 / 23.0,
+                (k % 5) as f32 / 5.0,
+                0.5 + 0.01 * (r % 9) as f32,
+            ]);
+        }
+        probe.extend([
+            (r % 4) as f32 - 1.5,
+            0.3,
+            -0.7,
+            0.05 * (r % 3) as f32,
+            1.0 - 0.1 * (r % 5) as f32,
+        ]);
+    }
+    let on = move |device: &Device| -> Vec<Vec<f32>> {
+        let device = device.clone().autodiff();
+        let field =
+            |v: &[f32], shape: [usize; 2]| Tensor::<1>::from_floats(v, &device).reshape(shape);
+        let sigma = field(&sigma, [rays, samples]).require_grad();
+        let rgb = Tensor::<1>::from_floats(rgb.as_slice(), &device)
+            .reshape([rays, samples, 3])
+            .require_grad();
+        let c = composite(
+            sigma.clone(),
+            rgb.clone(),
+            field(&t, [rays, samples]),
+            field(&delta, [rays, samples]),
+            [1.0, 1.0, 1.0],
+        );
+        let probe = field(&probe, [rays, 5]);
+        let outputs = Tensor::cat(
+            vec![
+                c.rgb.clone(),
+                c.depth.clone().reshape([rays, 1]),
+                c.opacity.clone().reshape([rays, 1]),
+            ],
+            1,
+        );
+        let grads = (outputs.clone() * probe).sum().backward();
+        vec![
+            values(outputs),
+            values(c.weights()),
+            values(sigma.grad(&grads).unwrap()),
+            values(rgb.grad(&grads).unwrap().reshape([rays, samples * 3])),
+        ]
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "compositing", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    for (i, what) in ["outputs", "weights", "density gradient", "colour gradient"]
+        .iter()
+        .enumerate()
+    {
+        let err = max_rel_diff(&wgpu[i], &flex[i], 1e-6);
+        eprintln!("compositing in one kernel, {what}: {err:e} relative to the largest");
+        assert!(err < 1e-4, "{what}: {err:e} relative to the largest");
+    }
+    // The opaque rays reach full opacity; the padding takes no gradient.
+    assert!(flex[0][4] > 0.999, "ray 0 opaque: {}", flex[0][4]);
+    assert_eq!(
+        wgpu[2][samples - 1 + samples * 4],
+        0.0,
+        "padding of ray 4 moved"
+    );
+}
+
+/// IDR's tracer with its rounds on the device (the GPU path) finds on wgpu the hits, depths and
+/// closest approaches the host's tracer finds: a box (faces, edges) whose field overstates
+/// distances, so the march brackets some rays and the search finds others; near and clear
+/// misses.
+#[test]
+fn surfaces_are_traced_on_wgpu_as_on_the_host() {
+    use ins_core::render::sphere_tracing::device::sphere_trace_on_device;
+    use ins_core::render::sphere_tracing::{TraceOptions, sphere_trace};
+    use ins_scene::geometry::Vec3;
+    use ins_scene::rays::Rays;
+    let mut rays = Rays::default();
+    for i in 0..40 {
+        let y = -0.5 + 1.0 * i as f32 / 39.0;
+        let dir = Vec3::new(0.1, 0.0, -1.0).normalize();
+        rays.push(Vec3::new(-0.1, y, 2.0), dir, 0.5, 3.5);
+    }
+    for k in [1.0f32, 1.5, 8.0] {
+        // The box |x|, |y|, |z| ≤ 0.3: its exact distance, times k.
+        let host = sphere_trace(&rays, &TraceOptions::default(), |p: &[f32]| {
+            p.chunks_exact(3)
+                .map(|p| {
+                    let q = Vec3::new(p[0].abs(), p[1].abs(), p[2].abs()) - Vec3::splat(0.3);
+                    k * (q.max(Vec3::ZERO).length() + q.max_element().min(0.0))
+                })
+                .collect()
+        });
+        let traced = {
+            let rays = rays.clone();
+            ins_tests::within(
+                ins_tests::WGPU_LIMIT_S,
+                "tracing on the device",
+                move || {
+                    let field = move |x: Tensor<2>| {
+                        let [n, _] = x.dims();
+                        let q = x.abs().sub_scalar(0.3);
+                        let outside = q.clone().clamp_min(0.0).square().sum_dim(1).sqrt();
+                        let inside = q.max_dim(1).clamp_max(0.0);
+                        (outside + inside).mul_scalar(k).reshape([n])
+                    };
+                    let device = BackendChoice::Wgpu.device();
+                    sphere_trace_on_device(&rays, &TraceOptions::default(), field, &device)
+                },
+            )
+        };
+        assert_eq!(traced.hit, host.hit, "k = {k}: the rays that hit");
+        assert!(host.hit.iter().any(|&h| h) && !host.hit.iter().all(|&h| h));
+        for i in 0..rays.len() {
+            let (a, b) = if host.hit[i] {
+                (traced.t[i], host.t[i])
+            } else {
+                (traced.t_min_sdf[i], host.t_min_sdf[i])
+            };
+            assert!(
+                (a - b).abs() < 1e-4,
+                "k = {k}, ray {i}: {a} on wgpu, {b} on the host"
+            );
+        }
+    }
+}
+
+/// A capture's learned background, fitted on the device without a read-back, follows flex's
+/// fit on wgpu, a batch with a NaN left out.
+#[test]
+fn a_learned_background_is_fitted_on_wgpu_as_on_the_host() {
+    use ins_models::nerf::background::{BackgroundFit, LearnedBackground};
+    let on = |device: &Device| -> Vec<f32> {
+        let mut fit = BackgroundFit::new(LearnedBackground::default(), [0.0; 3], device);
+        let mut out = Vec::new();
+        for step in 0..4 {
+            let rows =
+                |v: Vec<f32>| Tensor::<1>::from_floats(v.as_slice(), device).reshape([64, 3]);
+            let field: Vec<f32> = (0..192)
+                .map(|i| ((i * 7 + step) % 13) as f32 / 26.0)
+                .collect();
+            let mut target: Vec<f32> = (0..192)
+                .map(|i| ((i * 5 + step) % 11) as f32 / 11.0)
+                .collect();
+            if step == 2 {
+                target[17] = f32::NAN;
+            }
+            let opacity: Vec<f32> = (0..64)
+                .map(|i| ((i * 3 + step) % 10) as f32 / 10.0)
+                .collect();
+            let pred = fit.composite_and_fit(
+                rows(field),
+                Tensor::from_floats(opacity.as_slice(), device),
+                rows(target),
+            );
+            out.extend(values(pred.reshape([192])));
+            let (sums, colour) = fit.read();
+            out.extend(sums.num);
+            out.push(sums.den);
+            out.extend(colour);
+        }
+        out
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "fitting a background", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    assert_eq!(flex.len(), wgpu.len());
+    for (i, (a, b)) in flex.iter().zip(&wgpu).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-5 * (1.0 + a.abs()),
+            "value {i}: flex {a}, wgpu {b}"
+        );
+    }
+}
