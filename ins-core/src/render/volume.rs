@@ -19,19 +19,23 @@ pub struct Composite {
     pub depth: Tensor<1>,
     /// Opacity `Σ wᵢ`, `[R]`.
     pub opacity: Tensor<1>,
-    /// The densities and spacings, detached, for [`Composite::weights`].
-    sigma: Tensor<2>,
-    delta: Tensor<2>,
-    /// The weights when the composite computed them on the way (ordinary ops), detached.
-    computed: Option<Tensor<2>>,
+    weights: Weights,
+}
+
+/// A composite's per-sample weights, detached: computed on the way (ordinary ops), or left to
+/// compute from the densities and spacings if asked for (the kernel does not write them).
+#[derive(Debug, Clone)]
+enum Weights {
+    Computed(Tensor<2>),
+    Later { sigma: Tensor<2>, delta: Tensor<2> },
 }
 
 impl Composite {
     /// Per-sample weights `[R, S]`, without gradient: they choose where to sample next.
     pub fn weights(&self) -> Tensor<2> {
-        match &self.computed {
-            Some(w) => w.clone(),
-            None => weights(self.sigma.clone(), self.delta.clone()),
+        match &self.weights {
+            Weights::Computed(w) => w.clone(),
+            Weights::Later { sigma, delta } => weights(sigma.clone(), delta.clone()),
         }
     }
 }
@@ -82,12 +86,13 @@ pub fn composite(
             rgb: out.clone().slice([0..r, 0..3]),
             depth: out.clone().slice([0..r, 3..4]).reshape([r]),
             opacity: out.slice([0..r, 4..5]).reshape([r]),
-            sigma: sigma.detach(),
-            delta: delta.detach(),
-            computed: None,
+            weights: Weights::Later {
+                sigma: sigma.detach(),
+                delta: delta.detach(),
+            },
         };
     }
-    let w = weights(sigma.clone(), delta.clone());
+    let w = weights(sigma, delta);
     let colour: Tensor<2> = (w.clone().unsqueeze_dim::<3>(2) * rgb)
         .sum_dim(1)
         .reshape([r, 3]);
@@ -98,9 +103,7 @@ pub fn composite(
         rgb: colour + rest * bg.reshape([1, 3]),
         depth,
         opacity,
-        sigma: sigma.detach(),
-        delta: delta.detach(),
-        computed: Some(w.detach()),
+        weights: Weights::Computed(w.detach()),
     }
 }
 
