@@ -24,12 +24,14 @@ impl Optimizable for Toy {
     }
 }
 
+/// The toy model, seeded; drawn under the seeding lock, since this module's tests run in
+/// parallel on one device and its generator is shared (a parallel draw once gave a second run
+/// another model, the fresh-clone CI of the forty-eighth session).
 fn toy(device: &Device) -> Toy {
-    device.seed(0);
-    Toy {
+    ins_core::train::seeding::seeded(device, 0, || Toy {
         a: LinearConfig::new(2, 2).init(device),
         b: LinearConfig::new(2, 1).init(device),
-    }
+    })
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
