@@ -7,6 +7,8 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
 use super::merge_rows::merge_rows;
+use crate::kernels::cube_device;
+use crate::kernels::inverse_cdf::op::draw_op;
 
 /// `n` uniforms in `[0, 1)` from `seed`, as an `[rows, cols]` tensor.
 pub fn uniforms(rows: usize, cols: usize, seed: u64, device: &Device) -> Tensor<2> {
@@ -59,16 +61,22 @@ pub fn draw_from_weights(
     let [r, s] = t.dims();
     let device = t.device();
     let t = t.detach();
+    let u = match seed {
+        Some(seed) => uniforms(r, n, seed, &device),
+        None => Tensor::<2>::full([r, n], 0.5, &device),
+    };
+    let f32s = [t.dtype(), weights.dtype()]
+        .iter()
+        .all(|d| *d == burn::tensor::DType::F32);
+    if s >= 3 && f32s && cube_device(&device) {
+        return draw_op(t, weights.detach(), u);
+    }
     // Bin edges: midpoints between samples; the weights of the inner samples give the pdf.
     let mids = (t.clone().slice([0..r, 1..s]) + t.clone().slice([0..r, 0..s - 1])).mul_scalar(0.5);
     let w = weights.detach().slice([0..r, 1..s - 1]).add_scalar(1e-5);
     let pdf = w.clone() / w.sum_dim(1);
     let cdf = Tensor::cat(vec![Tensor::zeros([r, 1], &device), pdf.cumsum(1)], 1); // [R, s-1]
     let edges = s - 1;
-    let u = match seed {
-        Some(seed) => uniforms(r, n, seed, &device),
-        None => Tensor::<2>::full([r, n], 0.5, &device),
-    };
     let bins = Tensor::<1, Int>::arange(0..n as i64, &device)
         .float()
         .reshape([1, n]);

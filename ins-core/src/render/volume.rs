@@ -8,7 +8,8 @@
 
 use burn::prelude::*;
 
-use crate::kernels::composite::op::{composite_op, op_device};
+use crate::kernels::composite::op::composite_op;
+use crate::kernels::cube_device;
 
 /// What compositing gives per ray.
 #[derive(Debug, Clone)]
@@ -80,7 +81,7 @@ pub fn composite(
     let f32s = [sigma.dtype(), rgb.dtype(), t.dtype(), delta.dtype()]
         .iter()
         .all(|d| *d == burn::tensor::DType::F32);
-    if s > 0 && f32s && op_device(&device) && !t.is_tracked() && !delta.is_tracked() {
+    if s > 0 && f32s && cube_device(&device) && !t.is_tracked() && !delta.is_tracked() {
         let out = composite_op(sigma.clone(), rgb, t, delta.clone(), bg);
         return Composite {
             rgb: out.clone().slice([0..r, 0..3]),

@@ -9,11 +9,11 @@ use burn::prelude::*;
 use ins_core::backend::BackendChoice;
 use ins_tests::{max_rel_diff, values};
 
-/// NeuS's and NeRF's hierarchical sampler draws the same distances on wgpu as on flex, up to
-/// what the rounding of the CDF's running sum allows: a sample in a bin of probability `p`
-/// moves by at most the bin's width times that rounding over `p`. A sample put in the wrong
-/// bin, or at the wrong place in its bin, moves by far more. Checked against the same sampler
-/// evaluated on the host in f64.
+/// NeuS's and NeRF's hierarchical sampler (one kernel a call on wgpu, ops on flex) draws the
+/// same distances on wgpu as on flex, up to what the rounding of the CDF's running sum allows:
+/// a sample in a bin of probability `p` moves by at most the bin's width times that rounding
+/// over `p`. A sample put in the wrong bin, or at the wrong place in its bin, moves by far
+/// more. Checked against the same sampler evaluated on the host in f64.
 #[test]
 fn fine_samples_drawn_from_weights_move_only_by_their_cdfs_rounding_on_wgpu() {
     use ins_core::render::samplers::draw_from_weights;

@@ -10,9 +10,7 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::fusion::custom::TensorSpec;
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{
-    Autodiff, AutodiffBackend, Backend, Dispatch, DispatchDevice, Shape, backend_extension,
-};
+use burn::backend::{Autodiff, AutodiffBackend, Backend, Dispatch, Shape, backend_extension};
 use burn::prelude::*;
 
 use burn_cubecl::CubeBackend;
@@ -144,16 +142,7 @@ impl<B: Backend + CompositeOps, C: CheckpointStrategy> CompositeOps for Autodiff
     }
 }
 
-/// Whether the op runs on this device: a CubeCL runtime (wgpu, CUDA), with or without
-/// autodiff.
-pub fn op_device(device: &Device) -> bool {
-    matches!(
-        device.clone().inner().as_dispatch(),
-        DispatchDevice::Cube(_)
-    )
-}
-
-/// `[R, 5]` through the op. Only for devices where [`op_device`] holds; gradients reach
+/// `[R, 5]` through the op. Only for devices where [`crate::kernels::cube_device`] holds; gradients reach
 /// `sigma` and `rgb` only.
 pub fn composite_op(
     sigma: Tensor<2>,
