@@ -13,6 +13,7 @@
 //! - [`adam`]: Adam's step fused into one pass over each parameter.
 //! - [`composite`]: volume compositing as one kernel a pass on the GPU backends.
 //! - [`inverse_cdf`]: NeRF's hierarchical draws as one kernel on the GPU backends.
+//! - [`section_weights`]: NeuS's section weights as one kernel a pass on the GPU backends.
 //! - [`hash_grid`]: the multiresolution hash encoding on slices, as CubeCL kernels, and as a
 //!   Burn op with both backwards.
 
@@ -25,6 +26,7 @@ pub mod flex;
 pub mod gram;
 pub mod hash_grid;
 pub mod inverse_cdf;
+pub mod section_weights;
 pub mod sine;
 pub mod softplus;
 
@@ -32,7 +34,7 @@ use burn::backend::DispatchDevice;
 use burn::prelude::Device;
 
 /// Whether `device` runs CubeCL (wgpu, CUDA), with or without autodiff: where the kernels
-/// written as Burn ops for the GPU ([`composite`], [`inverse_cdf`]) run.
+/// written as Burn ops for the GPU ([`composite`], [`inverse_cdf`], [`section_weights`]) run.
 pub fn cube_device(device: &Device) -> bool {
     matches!(
         device.clone().inner().as_dispatch(),

@@ -9,6 +9,9 @@ use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
 
+use crate::kernels::cube_device;
+use crate::kernels::section_weights::op::section_weights_op;
+
 /// NeuS's learnable sharpness: `s = exp(10 · variance)` (the logistic density's inverse
 /// standard deviation). It grows as the surface settles, narrowing the band around the zero
 /// level set that the colour sees.
@@ -54,6 +57,22 @@ pub fn end_alpha(sdf_ends: Tensor<2>, live: Tensor<2>, s: Tensor<1>) -> Tensor<2
     let prev = cdf.clone().slice([0..r, 0..e - 1]);
     let next = cdf.slice([0..r, 1..e]);
     ((prev.clone() - next).add_scalar(1e-5) / prev.add_scalar(1e-5)).clamp(0.0, 1.0) * live
+}
+
+/// The sections' compositing weights `[R, S]` from the SDF at their ends `sdf_ends [R, S + 1]`,
+/// for rays live or not (`live_rays [R]`, 1 or 0) at sharpness `s [1]`:
+/// `alpha_weights(end_alpha(..))`, which the GPU backends run as one kernel forward and one
+/// backward ([`crate::kernels::section_weights`]).
+pub fn section_weights(sdf_ends: Tensor<2>, live_rays: Tensor<1>, s: Tensor<1>) -> Tensor<2> {
+    let [r, e] = sdf_ends.dims();
+    let f32s = [sdf_ends.dtype(), live_rays.dtype(), s.dtype()]
+        .iter()
+        .all(|d| *d == burn::tensor::DType::F32);
+    if e > 1 && f32s && cube_device(&sdf_ends.device()) {
+        return section_weights_op(sdf_ends, live_rays, s);
+    }
+    let live = live_rays.reshape([r, 1]).expand([r, e.saturating_sub(1)]);
+    alpha_weights(end_alpha(sdf_ends, live, s))
 }
 
 /// Compositing weights `wᵢ = αᵢ Πⱼ<ᵢ (1 − αⱼ)` from section opacities `[R, S]` (ordered along

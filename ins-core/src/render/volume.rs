@@ -8,7 +8,7 @@
 
 use burn::prelude::*;
 
-use crate::kernels::composite::op::composite_op;
+use crate::kernels::composite::op::{composite_op, weights_op};
 use crate::kernels::cube_device;
 
 /// What compositing gives per ray.
@@ -24,7 +24,8 @@ pub struct Composite {
 }
 
 /// A composite's per-sample weights, detached: computed on the way (ordinary ops), or left to
-/// compute from the densities and spacings if asked for (the kernel does not write them).
+/// compute from the densities and spacings if asked for (the compositing kernel does not write
+/// them; a kernel of their own does, in one launch).
 #[derive(Debug, Clone)]
 enum Weights {
     Computed(Tensor<2>),
@@ -36,7 +37,7 @@ impl Composite {
     pub fn weights(&self) -> Tensor<2> {
         match &self.weights {
             Weights::Computed(w) => w.clone(),
-            Weights::Later { sigma, delta } => weights(sigma.clone(), delta.clone()),
+            Weights::Later { sigma, delta } => weights_op(sigma.clone(), delta.clone()),
         }
     }
 }

@@ -2,9 +2,9 @@
 //! gradient, stratified inside the unit sphere) whose section weights at a fixed sharpness say
 //! where the surface is; the fine pass takes samples drawn there plus a stride of the coarse ones,
 //! evaluates the SDF with its exact gradient and the colour at each, and composites NeuS's
-//! section opacities ([`end_alpha`], at the learnable sharpness) in order. Evaluating only
-//! near the surface is what makes a volume step affordable on a CPU: every fine sample carries
-//! forward-mode tangents, a colour and their backward.
+//! section opacities ([`end_alpha`](ins_core::render::sdf_volume::end_alpha), at the learnable
+//! sharpness) in order. Evaluating only near the surface is what makes a volume step affordable
+//! on a CPU: every fine sample carries forward-mode tangents, a colour and their backward.
 
 use burn::prelude::*;
 use ins_core::kernels::flex::on_flex;
@@ -12,7 +12,7 @@ use ins_core::render::beyond_sphere::render_beyond_unit_sphere;
 use ins_core::render::gather::select_parallel;
 use ins_core::render::merge_rows::{merge_rows, merge_rows_with_indices};
 use ins_core::render::samplers::{draw_from_weights, stratified};
-use ins_core::render::sdf_volume::{alpha_weights, end_alpha};
+use ins_core::render::sdf_volume::section_weights;
 use ins_scene::geometry::{Bounds, Vec3};
 use ins_scene::rays::{Rays, flatten};
 use serde::{Deserialize, Serialize};
@@ -229,17 +229,13 @@ fn fine_positions(
     if opts.fine == 0 {
         return kept;
     }
-    let live_ray = (far.inner() - near.inner())
-        .greater_elem(0.0)
-        .float()
-        .reshape([r, 1]);
+    let live_ray = (far.inner() - near.inner()).greater_elem(0.0).float();
     // Round k draws `fine` positions from the sections' weights at sharpness 64·2^k.
     let draw = |round: usize, z: &Tensor<2>, f: &Tensor<2>| {
         let n = z.dims()[1];
-        let live = live_ray.clone().expand([r, n - 1]);
         let sharp = opts.coarse_sharpness * (1u32 << round.min(16)) as f32;
         let s = Tensor::<1>::from_floats([sharp], &device);
-        let w = alpha_weights(end_alpha(f.clone(), live, s));
+        let w = section_weights(f.clone(), live_ray.clone(), s);
         let mids =
             (z.clone().slice([0..r, 1..n]) + z.clone().slice([0..r, 0..n - 1])).mul_scalar(0.5);
         draw_from_weights(
@@ -446,8 +442,7 @@ fn composite_samples(
             .as_slice(),
         &device,
     );
-    let live_sections = live_rays.clone().reshape([r, 1]).expand([r, n - 1]);
-    let w = alpha_weights(end_alpha(f.reshape([r, n]), live_sections, s));
+    let w = section_weights(f.reshape([r, n]), live_rays.clone(), s);
     let opacity: Tensor<1> = w.clone().sum_dim(1).reshape([r]);
     let centres = z.clone().slice([0..r, 0..n - 1]) + lengths.mul_scalar(0.5);
     let depth = (w.clone() * centres).sum_dim(1).reshape([r]) / opacity.clone().clamp_min(1e-6);

@@ -1,9 +1,10 @@
 //! Single rendering operations whose GPU path differs from the CPU's, each on wgpu (Mesa's
 //! lavapipe where there is no GPU) against flex or the host: the hierarchical sampler's draws,
-//! ray samples merged instead of sorted, the smoothness term's picks, compositing in one
-//! kernel, sphere tracing with its rounds on the device, a learned background fitted on the
-//! device. The training steps they take part in are compared whole in `wgpu_steps.rs`. Each
-//! wgpu call runs under a timeout, so a hang fails the test instead of the suite.
+//! ray samples merged instead of sorted, the smoothness term's picks, compositing and NeuS's
+//! section weights in one kernel, sphere tracing with its rounds on the device, a learned
+//! background fitted on the device. The training steps they take part in are compared whole in
+//! `wgpu_steps.rs`. Each wgpu call runs under a timeout, so a hang fails the test instead of
+//! the suite.
 
 use burn::prelude::*;
 use ins_core::backend::BackendChoice;
@@ -177,9 +178,9 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
 }
 
 /// Compositing as one kernel forward and one backward (the GPU path) gives flex's ordinary ops'
-/// colours, depths, opacities, weights and the gradients of densities and colours: rays that
-/// turn opaque, rays nearly empty, rays ending in padding (δ = 0), a white background, and a
-/// loss that weighs all three outputs.
+/// colours, depths, opacities, weights (a kernel of their own) and the gradients of densities and
+/// colours: rays that turn opaque, rays nearly empty, rays ending in padding (δ = 0), a white
+/// background, and a loss that weighs all three outputs.
 #[test]
 fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
     use ins_core::render::volume::composite;
@@ -262,6 +263,72 @@ fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
         0.0,
         "padding of ray 4 moved"
     );
+}
+
+/// NeuS's section weights as one kernel forward and one backward (the GPU path) give flex's
+/// ordinary ops' weights and the gradients of the SDF and the sharpness: rays that cross the
+/// surface sharply (their first section opaque), rays that leave it again (a rising SDF, where
+/// the opacity's clamp stops the gradient), rays that miss it, and dead rays.
+#[test]
+fn section_weights_in_one_kernel_match_the_ordinary_ops_on_wgpu() {
+    use ins_core::render::sdf_volume::section_weights;
+    let (rays, ends) = (29usize, 33usize);
+    let (mut f, mut live, mut probe) = (Vec::new(), Vec::new(), Vec::new());
+    for r in 0..rays {
+        let crossing = 0.2 + 0.6 * (r % 7) as f32 / 7.0;
+        for k in 0..ends {
+            let x = k as f32 / (ends - 1) as f32;
+            f.push(match r % 4 {
+                0 => crossing - x,
+                1 => (x - crossing).abs() - 0.1,
+                2 => 0.3 + 0.1 * (x * 9.0).sin(),
+                _ => 0.02 * (crossing - x) + 0.001 * ((r * 13 + k * 7) % 11) as f32,
+            });
+            if k + 1 < ends {
+                probe.push(((r * 5 + k * 3) % 17) as f32 / 17.0 - 0.4);
+            }
+        }
+        live.push(if r % 9 == 4 { 0.0 } else { 1.0 });
+    }
+    let sharpness = 60.0f32;
+    let on = move |device: &Device| -> Vec<Vec<f32>> {
+        let device = device.clone().autodiff();
+        let ends_t = Tensor::<1>::from_floats(f.as_slice(), &device)
+            .reshape([rays, ends])
+            .require_grad();
+        let s = Tensor::<1>::from_floats([sharpness], &device).require_grad();
+        let live = Tensor::<1>::from_floats(live.as_slice(), &device);
+        let w = section_weights(ends_t.clone(), live, s.clone());
+        let probe = Tensor::<1>::from_floats(probe.as_slice(), &device).reshape([rays, ends - 1]);
+        let grads = (w.clone() * probe).sum().backward();
+        vec![
+            values(w),
+            values(ends_t.grad(&grads).unwrap()),
+            values(s.grad(&grads).unwrap()),
+        ]
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "section weights", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    for (i, what) in ["weights", "SDF gradient", "sharpness gradient"]
+        .iter()
+        .enumerate()
+    {
+        let err = max_rel_diff(&wgpu[i], &flex[i], 1e-6);
+        eprintln!("section weights in one kernel, {what}: {err:e} relative to the largest");
+        assert!(err < 1e-4, "{what}: {err:e} relative to the largest");
+    }
+    // The sharp crossings are opaque; a dead ray weighs nothing and takes no gradient.
+    let opacity = |r: usize| {
+        flex[0][r * (ends - 1)..(r + 1) * (ends - 1)]
+            .iter()
+            .sum::<f32>()
+    };
+    assert!(opacity(0) > 0.99, "ray 0 opaque: {}", opacity(0));
+    assert_eq!(opacity(4), 0.0, "dead ray 4");
+    assert!(wgpu[1][4 * ends..5 * ends].iter().all(|g| *g == 0.0));
+    assert!(flex[2][0].abs() > 1e-6, "no sharpness gradient to compare");
 }
 
 /// IDR's tracer with its rounds on the device (the GPU path) finds on wgpu the hits, depths and

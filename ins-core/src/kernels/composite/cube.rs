@@ -60,6 +60,24 @@ fn forward_kernel(
     out[r * 5 + 4] = opacity;
 }
 
+/// Ray `r`'s compositing weights `w_i = T_i (1 − e^{−τ_i})` (`out[r, ..]`), what the
+/// hierarchical sampler draws from.
+#[cube(launch)]
+fn weights_kernel(sigma: &[f32], delta: &[f32], out: &mut [f32], #[comptime] samples: usize) {
+    let rays = sigma.len() / samples;
+    if ABSOLUTE_POS >= rays {
+        terminate!();
+    }
+    let r = ABSOLUTE_POS;
+    let mut depth_in_front = 0.0f32;
+    for k in 0..samples {
+        let i = r * samples + k;
+        let tau = sigma[i] * delta[i];
+        out[i] = f32::exp(-depth_in_front) * (1.0 - f32::exp(-tau));
+        depth_in_front += tau;
+    }
+}
+
 /// `∂L/∂σ [R, S]` and `∂L/∂c [R, S, 3]` of ray `r` for the upstream gradient `grad [R, 5]`.
 #[cube(launch)]
 fn backward_kernel(
@@ -204,4 +222,28 @@ pub fn backward(
         grad_rgb.clone().into_buffer_arg(),
     );
     (grad_sigma, grad_rgb)
+}
+
+/// `[R, S]`: the weights of every sample under densities `sigma [R, S]` and spacings
+/// `delta [R, S]`, as [`forward`] weighs them.
+pub fn weights(sigma: CubeTensor, delta: CubeTensor) -> CubeTensor {
+    let [rays, samples] = [sigma.meta.shape()[0], sigma.meta.shape()[1]];
+    let out = empty_like(&sigma, [rays, samples]);
+    if rays == 0 || samples == 0 {
+        return out;
+    }
+    for (x, name) in [(&sigma, "densities"), (&delta, "spacings")] {
+        assert_eq!(x.dtype, DType::F32, "compositing runs in f32 ({name})");
+    }
+    let (client, (count, dim)) = (sigma.client.clone(), grid(&sigma, rays));
+    weights_kernel::launch(
+        &client,
+        count,
+        dim,
+        into_contiguous(sigma).into_buffer_arg(),
+        into_contiguous(delta).into_buffer_arg(),
+        out.clone().into_buffer_arg(),
+        samples,
+    );
+    out
 }

@@ -32,6 +32,10 @@ pub trait CompositeOps: Backend {
         background: FloatTensor<Self>,
     ) -> FloatTensor<Self>;
 
+    /// `[R, S]`: each sample's weight, without gradient (where to sample next).
+    #[fusion(dtype = sigma, shape = Shape::new([sigma[0], sigma[1]]))]
+    fn composite_weights(sigma: FloatTensor<Self>, delta: FloatTensor<Self>) -> FloatTensor<Self>;
+
     /// `(∂L/∂sigma, ∂L/∂rgb)` for the upstream gradient `grad [R, 5]` of the forward.
     #[fusion(meta = |sigma: &TensorSpec, rgb: &TensorSpec, _t: &TensorSpec, _delta: &TensorSpec, _background: &TensorSpec, _grad: &TensorSpec| (sigma.clone(), rgb.clone()))]
     fn composite_backward(
@@ -53,6 +57,10 @@ impl CompositeOps for CubeBackend {
         background: CubeTensor,
     ) -> CubeTensor {
         cube::forward(sigma, rgb, t, delta, background)
+    }
+
+    fn composite_weights(sigma: CubeTensor, delta: CubeTensor) -> CubeTensor {
+        cube::weights(sigma, delta)
     }
 
     fn composite_backward(
@@ -119,6 +127,13 @@ impl<B: Backend + CompositeOps, C: CheckpointStrategy> CompositeOps for Autodiff
         }
     }
 
+    fn composite_weights(sigma: FloatTensor<Self>, delta: FloatTensor<Self>) -> FloatTensor<Self> {
+        <Self as AutodiffBackend>::from_inner(B::composite_weights(
+            sigma.into_primitive(),
+            delta.into_primitive(),
+        ))
+    }
+
     fn composite_backward(
         sigma: FloatTensor<Self>,
         rgb: FloatTensor<Self>,
@@ -157,5 +172,14 @@ pub fn composite_op(
         t.into_dispatch(),
         delta.into_dispatch(),
         background.into_dispatch(),
+    ))
+}
+
+/// `[R, S]`: the weights [`composite_op`] composites with, without gradient. Only for devices
+/// where [`crate::kernels::cube_device`] holds.
+pub fn weights_op(sigma: Tensor<2>, delta: Tensor<2>) -> Tensor<2> {
+    Tensor::from_dispatch(<Dispatch as CompositeOps>::composite_weights(
+        sigma.into_dispatch(),
+        delta.into_dispatch(),
     ))
 }
