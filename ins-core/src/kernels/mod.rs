@@ -11,6 +11,7 @@
 //!   MLP's layers fused for renders); [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
 //!   activation and its slope; [`gram`]: Gram matrices.
 //! - [`adam`]: Adam's step fused into one pass over each parameter.
+//! - [`cube_launch`]: what the CubeCL kernels' launches share.
 //! - [`composite`]: volume compositing as one kernel a pass on the GPU backends.
 //! - [`inverse_cdf`]: NeRF's hierarchical draws as one kernel on the GPU backends.
 //! - [`section_weights`]: NeuS's section weights as one kernel a pass on the GPU backends.
@@ -19,6 +20,7 @@
 
 pub mod adam;
 pub mod composite;
+pub mod cube_launch;
 pub mod dense;
 pub mod dense_bf16;
 pub mod dense_chain;

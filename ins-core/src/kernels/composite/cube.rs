@@ -9,12 +9,12 @@
 //! `∂L/∂c_i = g_C w_i` and, since `w_i` depends on `τ_k` through `T_i` for `i > k`,
 //! `∂L/∂τ_k = q_k T_k e^{−τ_k} − Σ_{i>k} q_i w_i`, and `∂L/∂σ_k = δ_k ∂L/∂τ_k`.
 
-use burn::backend::{DType, Shape};
+use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
-use cubecl::{CubeDim, calculate_cube_count_elemwise};
+
+use crate::kernels::cube_launch::{empty_like, grid};
 
 /// The outputs a ray gets: colour (3), depth, opacity.
 pub const OUTPUTS: usize = 5;
@@ -150,16 +150,6 @@ fn inputs(
         assert_eq!(x.dtype, DType::F32, "compositing runs in f32 ({name})");
     }
     tensors.map(into_contiguous)
-}
-
-fn empty_like(t: &CubeTensor, shape: impl Into<Shape>) -> CubeTensor {
-    empty_device_dtype(t.client.clone(), t.device.clone(), shape.into(), DType::F32)
-}
-
-/// Launch sizes for one unit a ray.
-fn grid(t: &CubeTensor, rays: usize) -> (CubeCount, CubeDim) {
-    let dim = CubeDim::new(&t.client, rays);
-    (calculate_cube_count_elemwise(&t.client, rays, dim), dim)
 }
 
 /// `[R, 5]`: each ray's colour (background included), depth and opacity.

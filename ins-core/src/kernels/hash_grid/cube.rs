@@ -9,14 +9,14 @@
 //! index tensor in memory, and the backward a scatter per gather; here it is one kernel.
 
 use burn::backend::DType;
-use burn::backend::Shape;
 use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::{empty_device_dtype, zeros_client};
+use burn_cubecl::ops::numeric::zeros_client;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::features::AtomicUsage;
 use cubecl::ir::{ElemType, FloatKind, Type};
 use cubecl::prelude::*;
-use cubecl::{CubeDim, calculate_cube_count_elemwise};
+
+use crate::kernels::cube_launch::{empty_like, grid};
 
 use super::cube_kernels::{
     NativeAdd, SwapAdd, backward_positions_kernel, lookup_kernel, scatter_kernel,
@@ -42,12 +42,6 @@ fn level_records(layout: &Layout) -> Vec<u32> {
         .collect()
 }
 
-/// Launch sizes for `units` independent units.
-fn grid(t: &CubeTensor, units: usize) -> (CubeCount, CubeDim) {
-    let dim = CubeDim::new(&t.client, units);
-    (calculate_cube_count_elemwise(&t.client, units, dim), dim)
-}
-
 /// The layout's level records on the tensor's device.
 fn levels_arg(t: &CubeTensor, layout: &Layout) -> BufferArg {
     let records = level_records(layout);
@@ -63,10 +57,6 @@ fn contiguous_f32(t: CubeTensor, what: &str) -> CubeTensor {
         "the hash encoding runs in f32 ({what})"
     );
     into_contiguous(t)
-}
-
-fn empty_like(t: &CubeTensor, shape: impl Into<Shape>) -> CubeTensor {
-    empty_device_dtype(t.client.clone(), t.device.clone(), shape.into(), DType::F32)
 }
 
 /// How the table gradients are accumulated.

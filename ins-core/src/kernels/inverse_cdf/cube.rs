@@ -9,10 +9,10 @@
 
 use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
-use cubecl::{CubeDim, calculate_cube_count_elemwise};
+
+use crate::kernels::cube_launch::{empty_like, grid};
 
 /// Ray `r`'s `draws` new distances (`out[r, ..]`); `cdf [R, samples − 1]` is the kernel's
 /// scratch for the ray's CDF.
@@ -92,16 +92,12 @@ pub fn draw(t: CubeTensor, weights: CubeTensor, jitter: CubeTensor) -> CubeTenso
         );
     }
     let [t, weights, jitter] = tensors.map(into_contiguous);
-    let empty = |shape: [usize; 2]| {
-        empty_device_dtype(t.client.clone(), t.device.clone(), shape.into(), DType::F32)
-    };
-    let out = empty([rays, draws]);
+    let out = empty_like(&t, [rays, draws]);
     if rays == 0 || draws == 0 {
         return out;
     }
-    let cdf = empty([rays, samples - 1]);
-    let dim = CubeDim::new(&t.client, rays);
-    let count = calculate_cube_count_elemwise(&t.client, rays, dim);
+    let cdf = empty_like(&t, [rays, samples - 1]);
+    let (count, dim) = grid(&t, rays);
     draw_kernel::launch(
         &t.client.clone(),
         count,

@@ -6,7 +6,7 @@
 //! weight `w_k = α_k T_k`, `T_k = exp(Σ_{j<k} log(1 + 1e-7 − α_j))`
 //! ([`crate::render::sdf_volume`]'s definitions, rounding included).
 //!
-//! Backward, for the upstream gradient `g_k`: `w_i` depends on `α_k` through `T_i` for `i > k`,
+//! Backward, for the upstream gradient `g_k` and the forward's weights: `w_i` depends on `α_k` through `T_i` for `i > k`,
 //! so `∂L/∂α_k = g_k T_k − (Σ_{i>k} g_i w_i) / (1 + 1e-7 − α_k)`; the clamp passes it where
 //! `0 ≤ ρ_k ≤ 1` (as Burn's clamp does); `∂ρ_k/∂P_k = P_{k+1} / (P_k + ε)²`,
 //! `∂ρ_k/∂P_{k+1} = −1 / (P_k + ε)`, `∂P/∂f = s P (1 − P)` and `∂P/∂s = f P (1 − P)`. The
@@ -14,10 +14,10 @@
 
 use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
-use cubecl::{CubeDim, calculate_cube_count_elemwise};
+
+use crate::kernels::cube_launch::{empty_like, grid};
 
 /// `ε` of the opacity's ratio.
 const EPS: f32 = 1e-5;
@@ -73,6 +73,7 @@ fn backward_kernel(
     ends: &[f32],
     live: &[f32],
     sharpness: &[f32],
+    weights: &[f32],
     grad: &[f32],
     grad_ends: &mut [f32],
     grad_sharpness: &mut [f32],
@@ -85,21 +86,15 @@ fn backward_kernel(
     let r = ABSOLUTE_POS;
     let s = sharpness[0];
     let (row, out_row) = (r * (sections + 1), r * sections);
-    // First pass: Σ g_i w_i over the ray.
-    let mut p = 1.0 / (1.0 + f32::exp(-s * ends[row]));
-    let mut log_clear = 0.0f32;
+    // Σ g_i w_i over the ray, from the forward's weights.
     let mut total = 0.0f32;
     for k in 0..sections {
-        let next = 1.0 / (1.0 + f32::exp(-s * ends[row + k + 1]));
-        let (alpha, _pass) = opacity(p, next, live[r]);
-        total += grad[out_row + k] * alpha * f32::exp(log_clear);
-        log_clear += f32::ln(CLEAR - alpha);
-        p = next;
+        total += grad[out_row + k] * weights[out_row + k];
     }
-    // Second pass: each section's gradient, `Σ_{i>k} g_i w_i` as the total less the prefix.
+    // Each section's gradient, `Σ_{i>k} g_i w_i` as the total less the prefix.
     let mut f = ends[row];
-    p = 1.0 / (1.0 + f32::exp(-s * f));
-    log_clear = 0.0;
+    let mut p = 1.0 / (1.0 + f32::exp(-s * f));
+    let mut log_clear = 0.0f32;
     let mut prefix = 0.0f32;
     let mut carried = 0.0f32; // ∂L/∂P_k from section k − 1
     let mut ray_s = 0.0f32;
@@ -109,7 +104,7 @@ fn backward_kernel(
         let (alpha, pass) = opacity(p, next, live[r]);
         let through = f32::exp(log_clear);
         let g = grad[out_row + k];
-        prefix += g * alpha * through;
+        prefix += g * weights[out_row + k];
         let grad_alpha = g * through - (total - prefix) / (CLEAR - alpha);
         let grad_ratio = grad_alpha * live[r] * pass;
         let grad_p = carried + grad_ratio * next / ((p + EPS) * (p + EPS));
@@ -133,16 +128,6 @@ fn inputs(ends: CubeTensor, live: CubeTensor, sharpness: CubeTensor) -> [CubeTen
         assert_eq!(x.dtype, DType::F32, "section weights run in f32 ({name})");
     }
     tensors.map(into_contiguous)
-}
-
-fn empty_like(t: &CubeTensor, shape: impl Into<burn::backend::Shape>) -> CubeTensor {
-    empty_device_dtype(t.client.clone(), t.device.clone(), shape.into(), DType::F32)
-}
-
-/// Launch sizes for one unit a ray.
-fn grid(t: &CubeTensor, rays: usize) -> (CubeCount, CubeDim) {
-    let dim = CubeDim::new(&t.client, rays);
-    (calculate_cube_count_elemwise(&t.client, rays, dim), dim)
 }
 
 /// `[R, S]`: the weights of the sections between `ends [R, S + 1]`, for rays live or not
@@ -170,11 +155,12 @@ pub fn forward(ends: CubeTensor, live: CubeTensor, sharpness: CubeTensor) -> Cub
 }
 
 /// `(∂L/∂f [R, S + 1], ∂L/∂s per ray [R])` for the upstream gradient `grad [R, S]` of
-/// [`forward`].
+/// [`forward`], whose output `weights [R, S]` was.
 pub fn backward(
     ends: CubeTensor,
     live: CubeTensor,
     sharpness: CubeTensor,
+    weights: CubeTensor,
     grad: CubeTensor,
 ) -> (CubeTensor, CubeTensor) {
     let [rays, count] = [ends.meta.shape()[0], ends.meta.shape()[1]];
@@ -184,11 +170,9 @@ pub fn backward(
     if rays == 0 || sections == 0 {
         return (grad_ends, grad_sharpness);
     }
-    assert_eq!(
-        grad.dtype,
-        DType::F32,
-        "section weights run in f32 (upstream gradient)"
-    );
+    for (x, name) in [(&weights, "weights"), (&grad, "upstream gradient")] {
+        assert_eq!(x.dtype, DType::F32, "section weights run in f32 ({name})");
+    }
     let (client, (cubes, dim)) = (ends.client.clone(), grid(&ends, rays));
     let [ends, live, sharpness] = inputs(ends, live, sharpness).map(|x| x.into_buffer_arg());
     backward_kernel::launch(
@@ -198,6 +182,7 @@ pub fn backward(
         ends,
         live,
         sharpness,
+        into_contiguous(weights).into_buffer_arg(),
         into_contiguous(grad).into_buffer_arg(),
         grad_ends.clone().into_buffer_arg(),
         grad_sharpness.clone().into_buffer_arg(),

@@ -28,12 +28,14 @@ pub trait SectionWeightOps: Backend {
         sharpness: FloatTensor<Self>,
     ) -> FloatTensor<Self>;
 
-    /// `(∂L/∂ends, ∂L/∂sharpness per ray [R])` for the upstream gradient `grad [R, S]`.
-    #[fusion(meta = |ends: &TensorSpec, live: &TensorSpec, _sharpness: &TensorSpec, _grad: &TensorSpec| (ends.clone(), live.clone()))]
+    /// `(∂L/∂ends, ∂L/∂sharpness per ray [R])` for the upstream gradient `grad [R, S]` of
+    /// the forward, whose output `weights [R, S]` was.
+    #[fusion(meta = |ends: &TensorSpec, live: &TensorSpec, _sharpness: &TensorSpec, _weights: &TensorSpec, _grad: &TensorSpec| (ends.clone(), live.clone()))]
     fn section_weights_backward(
         ends: FloatTensor<Self>,
         live: FloatTensor<Self>,
         sharpness: FloatTensor<Self>,
+        weights: FloatTensor<Self>,
         grad: FloatTensor<Self>,
     ) -> (FloatTensor<Self>, FloatTensor<Self>);
 }
@@ -47,9 +49,10 @@ impl SectionWeightOps for CubeBackend {
         ends: CubeTensor,
         live: CubeTensor,
         sharpness: CubeTensor,
+        weights: CubeTensor,
         grad: CubeTensor,
     ) -> (CubeTensor, CubeTensor) {
-        super::cube::backward(ends, live, sharpness, grad)
+        super::cube::backward(ends, live, sharpness, weights, grad)
     }
 }
 
@@ -59,14 +62,18 @@ struct SectionWeightsBackward;
 /// The inputs the backward walks again.
 type Inputs<B> = [FloatTensor<B>; 3];
 
+/// The inputs and the forward's weights.
+type State<B> = [FloatTensor<B>; 4];
+
 impl<B: Backend + SectionWeightOps> Backward<B, 2> for SectionWeightsBackward {
-    type State = Inputs<B>;
+    type State = State<B>;
 
     fn backward(self, ops: Ops<Self::State, 2>, grads: &mut Gradients, _: &mut Checkpointer) {
         let [ends_node, sharpness_node] = ops.parents;
         let grad = grads.consume::<B>(&ops.node);
-        let [ends, live, sharpness] = ops.state;
-        let (grad_ends, per_ray) = B::section_weights_backward(ends, live, sharpness, grad);
+        let [ends, live, sharpness, weights] = ops.state;
+        let (grad_ends, per_ray) =
+            B::section_weights_backward(ends, live, sharpness, weights, grad);
         if let Some(node) = ends_node {
             grads.register::<B>(node.id, grad_ends);
         }
@@ -95,7 +102,8 @@ impl<B: Backend + SectionWeightOps, C: CheckpointStrategy> SectionWeightOps for 
         match prep {
             OpsKind::Tracked(prep) => {
                 let out = forward(inputs.clone());
-                prep.finish(inputs, out)
+                let [f, l, s] = inputs;
+                prep.finish([f, l, s, out.clone()], out)
             }
             OpsKind::UnTracked(prep) => prep.finish(forward(inputs)),
         }
@@ -105,12 +113,14 @@ impl<B: Backend + SectionWeightOps, C: CheckpointStrategy> SectionWeightOps for 
         ends: FloatTensor<Self>,
         live: FloatTensor<Self>,
         sharpness: FloatTensor<Self>,
+        weights: FloatTensor<Self>,
         grad: FloatTensor<Self>,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         let (grad_ends, per_ray) = B::section_weights_backward(
             ends.into_primitive(),
             live.into_primitive(),
             sharpness.into_primitive(),
+            weights.into_primitive(),
             grad.into_primitive(),
         );
         (
