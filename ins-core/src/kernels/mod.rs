@@ -14,6 +14,7 @@
 //! - [`cube_launch`]: what the CubeCL kernels' launches share.
 //! - [`composite`]: volume compositing as one kernel a pass on the GPU backends.
 //! - [`inverse_cdf`]: NeRF's hierarchical draws as one kernel on the GPU backends.
+//! - [`merge_sorted`]: two sorted sets of ray samples merged by one kernel on the GPU backends.
 //! - [`section_weights`]: NeuS's section weights as one kernel a pass on the GPU backends.
 //! - [`hash_grid`]: the multiresolution hash encoding on slices, as CubeCL kernels, and as a
 //!   Burn op with both backwards.
@@ -28,6 +29,7 @@ pub mod flex;
 pub mod gram;
 pub mod hash_grid;
 pub mod inverse_cdf;
+pub mod merge_sorted;
 pub mod section_weights;
 pub mod sine;
 pub mod softplus;
@@ -36,7 +38,8 @@ use burn::backend::DispatchDevice;
 use burn::prelude::Device;
 
 /// Whether `device` runs CubeCL (wgpu, CUDA), with or without autodiff: where the kernels
-/// written as Burn ops for the GPU ([`composite`], [`inverse_cdf`], [`section_weights`]) run.
+/// written as Burn ops for the GPU ([`composite`], [`inverse_cdf`], [`merge_sorted`],
+/// [`section_weights`]) run.
 pub fn cube_device(device: &Device) -> bool {
     matches!(
         device.clone().inner().as_dispatch(),

@@ -93,19 +93,20 @@ fn fine_samples_drawn_from_weights_move_only_by_their_cdfs_rounding_on_wgpu() {
     );
 }
 
-/// Two sets of samples merged along their rays on the device (CubeCL has no sort kernel; each
-/// value's place is counted instead of read back) come out as the host sorts them, each index
-/// pointing at its value: rows of 40 + 40 with ties within and across the sets, as IDR's volume
-/// merges its drawn samples into its coarse ones.
+/// Two sets of samples merged along their rays on the device (CubeCL has no sort kernel; one
+/// kernel walks each ray's two sets instead of reading them back) come out as the host sorts
+/// them, each index pointing at its value and equal values keeping their columns' order: rows
+/// of 48 + 32 with ties within and across the sets, as IDR's volume merges its drawn samples
+/// into its coarse ones.
 #[test]
 fn ray_samples_merge_on_wgpu_as_the_host_sorts() {
     use ins_core::render::merge_rows::merge_rows_with_indices;
-    let (rows, k) = (64usize, 80usize);
-    // Values on a coarse lattice (ties in every row), each half sorted.
+    let (rows, ka, k) = (64usize, 48usize, 80usize);
+    // Values on a coarse lattice (ties in every row), each set sorted.
     let x: Vec<f32> = (0..rows)
         .flat_map(|r| {
-            let a = (0..k / 2).map(|c| c as f32 * 0.25);
-            let mut b: Vec<f32> = (k / 2..k)
+            let a = (0..ka).map(|c| c as f32 * 0.25);
+            let mut b: Vec<f32> = (ka..k)
                 .map(|c| ((c * 37 + r * 11) % 53) as f32 * 0.125)
                 .collect();
             b.sort_by(f32::total_cmp);
@@ -116,10 +117,7 @@ fn ray_samples_merge_on_wgpu_as_the_host_sorts() {
         let x = x.clone();
         move |device: &Device| -> (Vec<f32>, Vec<i64>) {
             let t = Tensor::<1>::from_floats(x.as_slice(), device).reshape([rows, k]);
-            let (a, b) = (
-                t.clone().slice([0..rows, 0..k / 2]),
-                t.slice([0..rows, k / 2..k]),
-            );
+            let (a, b) = (t.clone().slice([0..rows, 0..ka]), t.slice([0..rows, ka..k]));
             let (sorted, order) = merge_rows_with_indices(a, b);
             let order = order.into_data().convert::<i64>();
             (values(sorted), order.try_to_vec::<i64>().unwrap())
@@ -130,6 +128,7 @@ fn ray_samples_merge_on_wgpu_as_the_host_sorts() {
         on(&BackendChoice::Wgpu.device())
     });
     assert_eq!(wgpu, flex, "the sorted rows differ from the host's");
+    let mut ties = 0;
     for r in 0..rows {
         let mut seen = vec![false; k];
         for j in 0..k {
@@ -140,8 +139,14 @@ fn ray_samples_merge_on_wgpu_as_the_host_sorts() {
             );
             seen[from] = true;
             assert_eq!(x[r * k + from], wgpu[r * k + j], "row {r}, place {j}");
+            if j > 0 && wgpu[r * k + j] == wgpu[r * k + j - 1] {
+                ties += 1;
+                let before = order[r * k + j - 1] as usize;
+                assert!(before < from, "row {r}, place {j}: tie out of column order");
+            }
         }
     }
+    assert!(ties > rows, "only {ties} ties: the rows test little");
 }
 
 /// The smoothness term's picks among the samples seen, made on the device, are the host's
