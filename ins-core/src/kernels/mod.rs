@@ -13,7 +13,8 @@
 //! - [`adam`]: Adam's step fused into one pass over each parameter.
 //! - [`cube_launch`]: what the CubeCL kernels' launches share.
 //! - [`composite`]: volume compositing as one kernel a pass on the GPU backends.
-//! - [`inverse_cdf`]: NeRF's hierarchical draws as one kernel on the GPU backends.
+//! - [`samplers`]: the ray samplers (stratified, NeRF's hierarchical draws) as kernels on the
+//!   GPU backends; [`jitter`]: their uniform numbers, hashed from a counter.
 //! - [`merge_sorted`]: two sorted sets of ray samples merged by one kernel on the GPU backends.
 //! - [`section_weights`]: NeuS's section weights as one kernel a pass on the GPU backends.
 //! - [`hash_grid`]: the multiresolution hash encoding on slices, as CubeCL kernels, and as a
@@ -28,8 +29,9 @@ pub mod dense_chain;
 pub mod flex;
 pub mod gram;
 pub mod hash_grid;
-pub mod inverse_cdf;
+pub mod jitter;
 pub mod merge_sorted;
+pub mod samplers;
 pub mod section_weights;
 pub mod sine;
 pub mod softplus;
@@ -38,7 +40,7 @@ use burn::backend::DispatchDevice;
 use burn::prelude::Device;
 
 /// Whether `device` runs CubeCL (wgpu, CUDA), with or without autodiff: where the kernels
-/// written as Burn ops for the GPU ([`composite`], [`inverse_cdf`], [`merge_sorted`],
+/// written as Burn ops for the GPU ([`composite`], [`samplers`], [`merge_sorted`],
 /// [`section_weights`]) run.
 pub fn cube_device(device: &Device) -> bool {
     matches!(

@@ -1,25 +1,38 @@
 //! Where along each ray the field is evaluated: stratified samples with jitter, and NeRF's
-//! hierarchical resampling (inverse CDF of the coarse weights), both on tensors. The random
-//! numbers come from a seeded host generator, so a step's samples depend only on its seed.
+//! hierarchical resampling (inverse CDF of the coarse weights), both on tensors (one kernel
+//! each on the GPU backends, [`crate::kernels::samplers`]). The jitter is hashed from a counter
+//! ([`crate::kernels::jitter`]), so a step's samples depend only on its seed, and are the same
+//! on every backend.
 
 use burn::prelude::*;
-use rand::rngs::SmallRng;
-use rand::{Rng, SeedableRng};
 
 use super::merge_rows::merge_rows;
 use crate::kernels::cube_device;
-use crate::kernels::inverse_cdf::op::draw_op;
+use crate::kernels::jitter::{keys, uniform};
+use crate::kernels::samplers::op::{draw_op, stratified_op};
 
-/// `n` uniforms in `[0, 1)` from `seed`, as an `[rows, cols]` tensor.
+/// `n` uniforms in `[0, 1)` from `seed` (entry `(r, c)` is number `r·cols + c` of the seed's
+/// stream), as an `[rows, cols]` tensor.
 pub fn uniforms(rows: usize, cols: usize, seed: u64, device: &Device) -> Tensor<2> {
-    let mut rng = SmallRng::seed_from_u64(seed);
-    let v: Vec<f32> = (0..rows * cols).map(|_| rng.random::<f32>()).collect();
+    let keys = keys(seed);
+    let v: Vec<f32> = (0..rows * cols).map(|i| uniform(keys, i as u32)).collect();
     Tensor::<1>::from_floats(v.as_slice(), device).reshape([rows, cols])
+}
+
+/// Whether the samplers' kernels take these tensors: a CubeCL device, f32.
+fn on_device(tensors: [&Tensor<1>; 2]) -> bool {
+    tensors
+        .iter()
+        .all(|t| t.dtype() == burn::tensor::DType::F32)
+        && cube_device(&tensors[0].device())
 }
 
 /// Stratified samples: `n` bins between `near [R]` and `far [R]`, one sample per bin, at the
 /// bin's centre (`jitter = None`) or at a uniform position inside it. Returns `t [R, n]`.
 pub fn stratified(near: Tensor<1>, far: Tensor<1>, n: usize, jitter: Option<u64>) -> Tensor<2> {
+    if on_device([&near, &far]) {
+        return stratified_op(near.detach(), far.detach(), n, jitter);
+    }
     let [r] = near.dims();
     let device = near.device();
     let offsets = match jitter {
@@ -61,16 +74,16 @@ pub fn draw_from_weights(
     let [r, s] = t.dims();
     let device = t.device();
     let t = t.detach();
-    let u = match seed {
-        Some(seed) => uniforms(r, n, seed, &device),
-        None => Tensor::<2>::full([r, n], 0.5, &device),
-    };
     let f32s = [t.dtype(), weights.dtype()]
         .iter()
         .all(|d| *d == burn::tensor::DType::F32);
     if s >= 3 && f32s && cube_device(&device) {
-        return draw_op(t, weights.detach(), u);
+        return draw_op(t, weights.detach(), n, seed);
     }
+    let u = match seed {
+        Some(seed) => uniforms(r, n, seed, &device),
+        None => Tensor::<2>::full([r, n], 0.5, &device),
+    };
     // Bin edges: midpoints between samples; the weights of the inner samples give the pdf.
     let mids = (t.clone().slice([0..r, 1..s]) + t.clone().slice([0..r, 0..s - 1])).mul_scalar(0.5);
     let w = weights.detach().slice([0..r, 1..s - 1]).add_scalar(1e-5);

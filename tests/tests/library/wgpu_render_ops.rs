@@ -1,5 +1,5 @@
 //! Single rendering operations whose GPU path differs from the CPU's, each on wgpu (Mesa's
-//! lavapipe where there is no GPU) against flex or the host: the hierarchical sampler's draws,
+//! lavapipe where there is no GPU) against flex or the host: the samplers and their jitter,
 //! ray samples merged instead of sorted, the smoothness term's picks, compositing and NeuS's
 //! section weights in one kernel, sphere tracing with its rounds on the device, a learned
 //! background fitted on the device. The training steps they take part in are compared whole in
@@ -91,6 +91,45 @@ fn fine_samples_drawn_from_weights_move_only_by_their_cdfs_rounding_on_wgpu() {
     eprintln!(
         "the hierarchical sampler: worst movement {worst:.3} of what its CDF's rounding allows"
     );
+}
+
+/// The samplers' jitter is made in their kernels on wgpu (hashed from a counter, as on the
+/// host): stratified samples with jitter and at bin centres, and centred draws from weights,
+/// are flex's.
+#[test]
+fn samplers_jitter_on_wgpu_as_on_the_host() {
+    use ins_core::render::samplers::{draw_from_weights, stratified};
+    let (rays, n) = (37usize, 24usize);
+    let near: Vec<f32> = (0..rays).map(|r| 0.5 + 0.1 * (r % 5) as f32).collect();
+    let far: Vec<f32> = (0..rays).map(|r| 3.0 + 0.3 * (r % 7) as f32).collect();
+    let on = move |device: &Device| -> Vec<Vec<f32>> {
+        let near = Tensor::<1>::from_floats(near.as_slice(), device);
+        let far = Tensor::<1>::from_floats(far.as_slice(), device);
+        let jittered = stratified(near.clone(), far.clone(), n, Some(0x5eed_0000_0042));
+        let centred = stratified(near, far, n, None);
+        let weights = jittered.clone().sin().abs();
+        let drawn = draw_from_weights(jittered.clone(), weights, 16, None);
+        [jittered, centred, drawn].map(values).to_vec()
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "the samplers", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    for (i, what) in ["jittered", "centred", "drawn at centres"]
+        .iter()
+        .enumerate()
+    {
+        let err = max_rel_diff(&wgpu[i], &flex[i], 1e-6);
+        assert!(
+            err < 1e-5,
+            "{what} samples: {err:e} relative to the largest"
+        );
+    }
+    // The jitter moved the samples off their bins' centres.
+    let moved = (0..rays * n)
+        .filter(|&i| (flex[0][i] - flex[1][i]).abs() > 1e-4)
+        .count();
+    assert!(moved > rays * n * 9 / 10, "only {moved} samples jittered");
 }
 
 /// Two sets of samples merged along their rays on the device (CubeCL has no sort kernel; one
