@@ -38,6 +38,7 @@ pub mod softplus;
 
 use burn::backend::DispatchDevice;
 use burn::prelude::Device;
+use burn::tensor::DType;
 
 /// Whether `device` runs CubeCL (wgpu, CUDA), with or without autodiff: where the kernels
 /// written as Burn ops for the GPU ([`composite`], [`samplers`], [`merge_sorted`],
@@ -47,4 +48,10 @@ pub fn cube_device(device: &Device) -> bool {
         device.clone().inner().as_dispatch(),
         DispatchDevice::Cube(_)
     )
+}
+
+/// Whether a GPU kernel takes tensors of these `dtypes` on `device`: a [`cube_device`], all f32
+/// (the kernels are written for f32; other precisions keep Burn's ops).
+pub fn cube_f32(device: &Device, dtypes: &[DType]) -> bool {
+    dtypes.iter().all(|d| *d == DType::F32) && cube_device(device)
 }

@@ -8,7 +8,7 @@
 
 use burn::prelude::*;
 
-use crate::kernels::cube_device;
+use crate::kernels::cube_f32;
 use crate::kernels::merge_sorted::op::merge_op;
 
 /// `a [R, Ka]` and `b [R, Kb]`, each sorted ascending along its rows, as one sorted row each:
@@ -32,8 +32,5 @@ pub fn merge_rows_with_indices(a: Tensor<2>, b: Tensor<2>) -> (Tensor<2>, Tensor
 
 /// Whether the merge kernel takes the rows: a CubeCL device, f32, both sets non-empty.
 fn on_device(a: &Tensor<2>, b: &Tensor<2>) -> bool {
-    let f32s = [a.dtype(), b.dtype()]
-        .iter()
-        .all(|d| *d == burn::tensor::DType::F32);
-    f32s && a.dims()[1] > 0 && b.dims()[1] > 0 && cube_device(&a.device())
+    a.dims()[1] > 0 && b.dims()[1] > 0 && cube_f32(&a.device(), &[a.dtype(), b.dtype()])
 }

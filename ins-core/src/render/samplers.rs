@@ -7,7 +7,7 @@
 use burn::prelude::*;
 
 use super::merge_rows::merge_rows;
-use crate::kernels::cube_device;
+use crate::kernels::cube_f32;
 use crate::kernels::jitter::{keys, uniform};
 use crate::kernels::samplers::op::{draw_op, stratified_op};
 
@@ -19,18 +19,10 @@ pub fn uniforms(rows: usize, cols: usize, seed: u64, device: &Device) -> Tensor<
     Tensor::<1>::from_floats(v.as_slice(), device).reshape([rows, cols])
 }
 
-/// Whether the samplers' kernels take these tensors: a CubeCL device, f32.
-fn on_device(tensors: [&Tensor<1>; 2]) -> bool {
-    tensors
-        .iter()
-        .all(|t| t.dtype() == burn::tensor::DType::F32)
-        && cube_device(&tensors[0].device())
-}
-
 /// Stratified samples: `n` bins between `near [R]` and `far [R]`, one sample per bin, at the
 /// bin's centre (`jitter = None`) or at a uniform position inside it. Returns `t [R, n]`.
 pub fn stratified(near: Tensor<1>, far: Tensor<1>, n: usize, jitter: Option<u64>) -> Tensor<2> {
-    if on_device([&near, &far]) {
+    if cube_f32(&near.device(), &[near.dtype(), far.dtype()]) {
         return stratified_op(near.detach(), far.detach(), n, jitter);
     }
     let [r] = near.dims();
@@ -74,10 +66,7 @@ pub fn draw_from_weights(
     let [r, s] = t.dims();
     let device = t.device();
     let t = t.detach();
-    let f32s = [t.dtype(), weights.dtype()]
-        .iter()
-        .all(|d| *d == burn::tensor::DType::F32);
-    if s >= 3 && f32s && cube_device(&device) {
+    if s >= 3 && cube_f32(&device, &[t.dtype(), weights.dtype()]) {
         return draw_op(t, weights.detach(), n, seed);
     }
     let u = match seed {

@@ -9,7 +9,7 @@ use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
 
-use crate::kernels::cube_device;
+use crate::kernels::cube_f32;
 use crate::kernels::section_weights::op::section_weights_op;
 
 /// NeuS's learnable sharpness: `s = exp(10 · variance)` (the logistic density's inverse
@@ -65,10 +65,8 @@ pub fn end_alpha(sdf_ends: Tensor<2>, live: Tensor<2>, s: Tensor<1>) -> Tensor<2
 /// backward ([`crate::kernels::section_weights`]).
 pub fn section_weights(sdf_ends: Tensor<2>, live_rays: Tensor<1>, s: Tensor<1>) -> Tensor<2> {
     let [r, e] = sdf_ends.dims();
-    let f32s = [sdf_ends.dtype(), live_rays.dtype(), s.dtype()]
-        .iter()
-        .all(|d| *d == burn::tensor::DType::F32);
-    if e > 1 && f32s && cube_device(&sdf_ends.device()) {
+    let dtypes = [sdf_ends.dtype(), live_rays.dtype(), s.dtype()];
+    if e > 1 && cube_f32(&sdf_ends.device(), &dtypes) {
         return section_weights_op(sdf_ends, live_rays, s);
     }
     let live = live_rays.reshape([r, 1]).expand([r, e.saturating_sub(1)]);

@@ -9,7 +9,7 @@
 use burn::prelude::*;
 
 use crate::kernels::composite::op::{composite_op, weights_op};
-use crate::kernels::cube_device;
+use crate::kernels::cube_f32;
 
 /// What compositing gives per ray.
 #[derive(Debug, Clone)]
@@ -79,10 +79,8 @@ pub fn composite(
     let [r, s] = sigma.dims();
     let device = sigma.device();
     let bg = Tensor::<1>::from_floats(background, &device);
-    let f32s = [sigma.dtype(), rgb.dtype(), t.dtype(), delta.dtype()]
-        .iter()
-        .all(|d| *d == burn::tensor::DType::F32);
-    if s > 0 && f32s && cube_device(&device) && !t.is_tracked() && !delta.is_tracked() {
+    let dtypes = [sigma.dtype(), rgb.dtype(), t.dtype(), delta.dtype()];
+    if s > 0 && cube_f32(&device, &dtypes) && !t.is_tracked() && !delta.is_tracked() {
         let out = composite_op(sigma.clone(), rgb, t, delta.clone(), bg);
         return Composite {
             rgb: out.clone().slice([0..r, 0..3]),

@@ -9,12 +9,11 @@
 //! `∂L/∂c_i = g_C w_i` and, since `w_i` depends on `τ_k` through `T_i` for `i > k`,
 //! `∂L/∂τ_k = q_k T_k e^{−τ_k} − Σ_{i>k} q_i w_i`, and `∂L/∂σ_k = δ_k ∂L/∂τ_k`.
 
-use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use crate::kernels::cube_launch::{empty_like, grid};
+use crate::kernels::cube_launch::{assert_f32, empty_like, grid};
 
 /// The outputs a ray gets: colour (3), depth, opacity.
 pub const OUTPUTS: usize = 5;
@@ -138,7 +137,6 @@ fn inputs(
     delta: CubeTensor,
     background: CubeTensor,
 ) -> [CubeTensor; 5] {
-    let tensors = [sigma, rgb, t, delta, background];
     let names = [
         "densities",
         "colours",
@@ -146,9 +144,9 @@ fn inputs(
         "spacings",
         "background",
     ];
-    for (x, name) in tensors.iter().zip(names) {
-        assert_eq!(x.dtype, DType::F32, "compositing runs in f32 ({name})");
-    }
+    let tensors = [sigma, rgb, t, delta, background];
+    let named: Vec<_> = tensors.iter().zip(names).collect();
+    assert_f32("compositing", &named);
     tensors.map(into_contiguous)
 }
 
@@ -190,11 +188,7 @@ pub fn backward(
     if rays == 0 || samples == 0 {
         return (grad_sigma, grad_rgb);
     }
-    assert_eq!(
-        grad.dtype,
-        DType::F32,
-        "compositing runs in f32 (upstream gradient)"
-    );
+    assert_f32("compositing", &[(&grad, "upstream gradient")]);
     let (client, (count, dim)) = (sigma.client.clone(), grid(&sigma, rays));
     let [sigma, rgb, t, delta, background] =
         inputs(sigma, rgb, t, delta, background).map(|x| x.into_buffer_arg());
@@ -222,9 +216,10 @@ pub fn weights(sigma: CubeTensor, delta: CubeTensor) -> CubeTensor {
     if rays == 0 || samples == 0 {
         return out;
     }
-    for (x, name) in [(&sigma, "densities"), (&delta, "spacings")] {
-        assert_eq!(x.dtype, DType::F32, "compositing runs in f32 ({name})");
-    }
+    assert_f32(
+        "compositing",
+        &[(&sigma, "densities"), (&delta, "spacings")],
+    );
     let (client, (count, dim)) = (sigma.client.clone(), grid(&sigma, rays));
     weights_kernel::launch(
         &client,

@@ -2,12 +2,11 @@
 //! next values, `a`'s on a tie (so equal values keep their columns' order, as a stable sort of
 //! the joined row `[a, b]` does), and its column in that joined row.
 
-use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use crate::kernels::cube_launch::{empty_like, grid};
+use crate::kernels::cube_launch::{assert_f32, empty_like, grid};
 
 /// Ray `r`'s merged row (`out[0, r, ..]`) and each place's column in `[a, b]`
 /// (`out[1, r, ..]`, as f32: exact below 2²⁴ columns).
@@ -57,9 +56,7 @@ pub fn merge(a: CubeTensor, b: CubeTensor) -> CubeTensor {
         width_a > 0 && width_b > 0,
         "merging rows needs two non-empty sets"
     );
-    for (x, name) in [(&a, "first set"), (&b, "second set")] {
-        assert_eq!(x.dtype, DType::F32, "merging rows runs in f32 ({name})");
-    }
+    assert_f32("merging rows", &[(&a, "first set"), (&b, "second set")]);
     let out = empty_like(&a, [2, rays, width_a + width_b]);
     if rays == 0 {
         return out;

@@ -11,12 +11,11 @@
 //! of the way to `m_{b+1}`. The `u` increase with `i`, so the count of edges below grows as
 //! the draws go: one pass over the CDF serves them all.
 
-use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use crate::kernels::cube_launch::{empty_like, grid};
+use crate::kernels::cube_launch::{assert_f32, empty_like, grid};
 use crate::kernels::jitter::{keys, uniform_in_kernel};
 
 /// Ray `r`'s `draws` new distances (`out[r, ..]`); `cdf [R, samples − 1]` is the kernel's
@@ -93,13 +92,10 @@ pub fn draw(t: CubeTensor, weights: CubeTensor, draws: usize, seed: Option<u64>)
         samples >= 3,
         "drawing from weights needs three samples a ray, not {samples}"
     );
-    for (x, name) in [(&t, "distances"), (&weights, "weights")] {
-        assert_eq!(
-            x.dtype,
-            DType::F32,
-            "drawing from weights runs in f32 ({name})"
-        );
-    }
+    assert_f32(
+        "drawing from weights",
+        &[(&t, "distances"), (&weights, "weights")],
+    );
     let out = empty_like(&t, [rays, draws]);
     if rays == 0 || draws == 0 {
         return out;
@@ -156,13 +152,7 @@ pub fn stratified(
     seed: Option<u64>,
 ) -> CubeTensor {
     let rays = near.meta.shape()[0];
-    for (x, name) in [(&near, "near"), (&far, "far")] {
-        assert_eq!(
-            x.dtype,
-            DType::F32,
-            "stratified samples run in f32 ({name})"
-        );
-    }
+    assert_f32("stratified sampling", &[(&near, "near"), (&far, "far")]);
     let out = empty_like(&near, [rays, samples]);
     if rays == 0 || samples == 0 {
         return out;

@@ -12,18 +12,23 @@
 //! `∂ρ_k/∂P_{k+1} = −1 / (P_k + ε)`, `∂P/∂f = s P (1 − P)` and `∂P/∂s = f P (1 − P)`. The
 //! sharpness's gradient is summed over the ray's sections into one value a ray.
 
-use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use crate::kernels::cube_launch::{empty_like, grid};
+use crate::kernels::cube_launch::{assert_f32, empty_like, grid};
 
 /// `ε` of the opacity's ratio.
 const EPS: f32 = 1e-5;
 
 /// `1 + 1e-7`: what the clear share's logarithm is taken of, less the opacity.
 const CLEAR: f32 = 1.0 + 1e-7;
+
+/// `σ(x) = 1 / (1 + e^(−x))`.
+#[cube]
+fn logistic(x: f32) -> f32 {
+    1.0 / (1.0 + f32::exp(-x))
+}
 
 /// Section `k`'s opacity and the clamp's pass (1 inside `[0, 1]`, else 0).
 #[cube]
@@ -55,10 +60,10 @@ fn forward_kernel(
     let r = ABSOLUTE_POS;
     let s = sharpness[0];
     let (row, out_row) = (r * (sections + 1), r * sections);
-    let mut p = 1.0 / (1.0 + f32::exp(-s * ends[row]));
+    let mut p = logistic(s * ends[row]);
     let mut log_clear = 0.0f32;
     for k in 0..sections {
-        let next = 1.0 / (1.0 + f32::exp(-s * ends[row + k + 1]));
+        let next = logistic(s * ends[row + k + 1]);
         let (alpha, _pass) = opacity(p, next, live[r]);
         out[out_row + k] = alpha * f32::exp(log_clear);
         log_clear += f32::ln(CLEAR - alpha);
@@ -93,14 +98,14 @@ fn backward_kernel(
     }
     // Each section's gradient, `Σ_{i>k} g_i w_i` as the total less the prefix.
     let mut f = ends[row];
-    let mut p = 1.0 / (1.0 + f32::exp(-s * f));
+    let mut p = logistic(s * f);
     let mut log_clear = 0.0f32;
     let mut prefix = 0.0f32;
     let mut carried = 0.0f32; // ∂L/∂P_k from section k − 1
     let mut ray_s = 0.0f32;
     for k in 0..sections {
         let f_next = ends[row + k + 1];
-        let next = 1.0 / (1.0 + f32::exp(-s * f_next));
+        let next = logistic(s * f_next);
         let (alpha, pass) = opacity(p, next, live[r]);
         let through = f32::exp(log_clear);
         let g = grad[out_row + k];
@@ -124,9 +129,11 @@ fn backward_kernel(
 /// The three inputs both kernels read, `[f, l, s]`, as contiguous f32.
 fn inputs(ends: CubeTensor, live: CubeTensor, sharpness: CubeTensor) -> [CubeTensor; 3] {
     let tensors = [ends, live, sharpness];
-    for (x, name) in tensors.iter().zip(["SDF", "liveness", "sharpness"]) {
-        assert_eq!(x.dtype, DType::F32, "section weights run in f32 ({name})");
-    }
+    let named: Vec<_> = tensors
+        .iter()
+        .zip(["SDF", "liveness", "sharpness"])
+        .collect();
+    assert_f32("section weights", &named);
     tensors.map(into_contiguous)
 }
 
@@ -170,9 +177,10 @@ pub fn backward(
     if rays == 0 || sections == 0 {
         return (grad_ends, grad_sharpness);
     }
-    for (x, name) in [(&weights, "weights"), (&grad, "upstream gradient")] {
-        assert_eq!(x.dtype, DType::F32, "section weights run in f32 ({name})");
-    }
+    assert_f32(
+        "section weights",
+        &[(&weights, "weights"), (&grad, "upstream gradient")],
+    );
     let (client, (cubes, dim)) = (ends.client.clone(), grid(&ends, rays));
     let [ends, live, sharpness] = inputs(ends, live, sharpness).map(|x| x.into_buffer_arg());
     backward_kernel::launch(
