@@ -6,8 +6,8 @@
 # refuses would spend them. So this runs the benchmark workloads and small training runs on
 # `--backend cuda` against a stand-in for NVIDIA's driver (scripts/cuda_standin): NVIDIA's own
 # NVRTC (from PyPI) compiles every kernel the runs ask for, autotune's candidates included, for
-# an H100 (sm_90a); the stand-in keeps each module's PTX and runs nothing; then NVIDIA's ptxas
-# assembles every module for sm_90a. A run's numbers mean nothing here, except one: with no
+# an H100 (sm_90a) and assembles it (its CUBIN is what the program loads); the stand-in keeps
+# each module and runs nothing; NVIDIA's ptxas assembles any module left as PTX. A run's numbers mean nothing here, except one: with no
 # kernel running, a benchmark's `ms_per_step` is the host's own time for a step (Burn's
 # autodiff and fusion, CubeCL's launches, the program's own host work), the floor under a GPU
 # step on this CPU.
@@ -63,7 +63,7 @@ export INS_CACHE_DIR=$W/cache
 stamp "NVRTC $(ls "$CU"/lib/libnvrtc.so.* | head -1 | xargs basename), CUDA_PATH=$CU"
 
 failed=0; guarded=0
-stage() { # stage NAME command...: the run, its PTX in $W/ptx/NAME, its output in $W/logs/NAME
+stage() { # stage NAME command...: the run, its modules in $W/ptx/NAME, its output in $W/logs/NAME
   local name=$1; shift
   [[ " ${STAGES:-bench nerf nerf_stylize idr idr_stylize host host_channel} " == *" $name "* ]] || return 0
   mkdir -p "$W/ptx/$name"
@@ -108,7 +108,9 @@ stage host_channel env CUBECL_DEVICE_HANDLE=channel "$BIN" bench --backend cuda 
   nerf-grid-stylize
 
 # Every module assembled for the H100 (sm_90a), two at a time.
-stamp "ptxas on $(find "$W/ptx" -name '*.ptx' | wc -l) modules"
+# NVRTC assembles for sm_90a itself and hands over its CUBIN (the patched cubecl-cuda); a module
+# left as PTX (CUBECL_NVRTC_CUBIN=0) is assembled here.
+stamp "ptxas on $(find "$W/ptx" -name '*.ptx' | wc -l) PTX modules"
 find "$W/ptx" -name '*.ptx' | xargs -P2 -I{} sh -c \
   "'$CU/bin/ptxas' -arch=sm_90a -o /dev/null {} 2> {}.log || echo {}" > "$W/ptxas_failed.txt"
 stamp "ptxas done: $(wc -l < "$W/ptxas_failed.txt") failed"
@@ -121,8 +123,8 @@ refused=$(grep -l "Compilation Error" "$W"/logs/* 2>/dev/null | wc -l)
 probe=$(cat "$W"/logs/* | grep -c "frontend/scalar.rs:78")
 other=$(grep -h "error: internal failure" "$W"/logs/* | grep -v -c "frontend/scalar.rs:78")
 echo
-echo "modules compiled by NVRTC: $(find "$W/ptx" -name '*.ptx' | wc -l); NVRTC refusals: $refused"
-echo "ptxas failures: $(wc -l < "$W/ptxas_failed.txt"); tensor-core (mma) modules: $(grep -l -r 'mma.sync' "$W/ptx" --include='*.ptx' | wc -l)"
+echo "modules compiled by NVRTC: $(find "$W/ptx" -name '*.ptx' -o -name '*.cubin' | wc -l) ($(find "$W/ptx" -name '*.cubin' | wc -l) as CUBIN); NVRTC refusals: $refused"
+echo "ptxas failures: $(wc -l < "$W/ptxas_failed.txt"); tensor-core (mma) modules among the PTX: $(grep -l -r 'mma.sync' "$W/ptx" --include='*.ptx' | wc -l)"
 echo "throughput-probe panics (stand-in timing, see above): $probe; other internal failures: $other"
 (( other == 0 )) || failed=1
 echo "training runs stopped by the divergence guard (expected here): $guarded"

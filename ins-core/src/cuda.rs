@@ -208,4 +208,32 @@ mod tests {
         add("cccl/cuda/barrier"); // CUDA 13's place for it
         assert!(missing_header(inc).is_none());
     }
+
+    /// The patched `cubecl-runtime` (third_party/cubecl-runtime-0.11.3/PATCHED.md): autotune's
+    /// candidates are prepared (launches dropped, kernels compiling on CUDA's workers) only
+    /// where a server compiles in the background, and a tuner nested in a prepared candidate
+    /// still measures for real, since the innermost guard decides.
+    #[test]
+    fn autotune_prepares_candidates_where_kernels_compile_in_the_background() {
+        use cubecl::dry_run::{LaunchMode, Prepare, RealRun, background_compilation, launch_mode};
+        // No CUDA server here: wgpu and flex compile nothing in the background.
+        assert!(!background_compilation());
+        assert_eq!(launch_mode(), LaunchMode::Execute);
+        let measuring = RealRun::new();
+        {
+            let _prepared = Prepare::new();
+            assert_eq!(launch_mode(), LaunchMode::Prepare);
+            assert!(
+                launch_mode().is_skipped(),
+                "a server unaware of it drops the launch"
+            );
+            {
+                let _nested_tuner = RealRun::new();
+                assert_eq!(launch_mode(), LaunchMode::Execute);
+            }
+            assert_eq!(launch_mode(), LaunchMode::Prepare);
+        }
+        assert_eq!(launch_mode(), LaunchMode::Execute);
+        drop(measuring);
+    }
 }

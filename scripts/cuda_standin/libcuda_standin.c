@@ -1,9 +1,9 @@
 // A stand-in for NVIDIA's driver library (libcuda.so) on machines without a GPU, for
 // scripts/cuda_compile_check.sh: `--backend cuda` then starts, NVRTC (the real one) compiles
-// every kernel a run asks for, and this library takes each compiled module (PTX), writes it
-// to $STANDIN_PTX_DIR for ptxas, and records each launch. No kernel runs: device memory is
-// host memory that kernels never write, so a run's numbers mean nothing, only that every
-// kernel compiled. The device it reports is an H100's (sm_90, 132 SMs, 227 KiB of shared
+// every kernel a run asks for, and this library takes each compiled module (NVRTC's CUBIN, or
+// PTX where NVRTC gave none), writes it to $STANDIN_PTX_DIR, and records each launch. No
+// kernel runs: device memory is host memory that kernels never write, so a run's numbers mean
+// nothing, only that every kernel compiled. The device it reports is an H100's (sm_90, 132 SMs, 227 KiB of shared
 // memory a block), named so that ins-core's first-kernel probe knows not to check its sum.
 #define _GNU_SOURCE
 #include <cuda.h>
@@ -11,6 +11,7 @@
 #include <link.h>
 #include <stdatomic.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -192,17 +193,33 @@ CUresult cuMemsetD32Async(CUdeviceptr d, unsigned int v, size_t n, CUstream s) {
   return CUDA_SUCCESS;
 }
 
-// Modules: the PTX NVRTC produced, kept for ptxas; functions are names.
+// Modules: what NVRTC produced, kept for checking: PTX text (for ptxas), or the CUBIN NVRTC
+// assembled itself (an ELF64 image, written whole: it ends where its program or section
+// headers end, whichever is last).
 struct function { char name[512]; };
 CUresult cuModuleLoadData(CUmodule *m, const void *image) {
   long id = atomic_fetch_add(&modules, 1);
   const char *dir = getenv("STANDIN_PTX_DIR");
   if (dir && *dir) {
+    const unsigned char *b = image;
+    int elf = b[0] == 0x7f && b[1] == 'E' && b[2] == 'L' && b[3] == 'F';
     char path[4096];
-    snprintf(path, sizeof path, "%s/%06ld.ptx", dir, id);
+    snprintf(path, sizeof path, "%s/%06ld.%s", dir, id, elf ? "cubin" : "ptx");
     FILE *f = fopen(path, "w");
     if (!f) return CUDA_ERROR_FILE_NOT_FOUND;
-    fputs((const char *)image, f);
+    if (elf) {
+      uint64_t phoff, shoff; uint16_t phentsize, phnum, shentsize, shnum;
+      memcpy(&phoff, b + 0x20, 8);
+      memcpy(&shoff, b + 0x28, 8);
+      memcpy(&phentsize, b + 0x36, 2);
+      memcpy(&phnum, b + 0x38, 2);
+      memcpy(&shentsize, b + 0x3a, 2);
+      memcpy(&shnum, b + 0x3c, 2);
+      uint64_t ph_end = phoff + (uint64_t)phentsize * phnum, sh_end = shoff + (uint64_t)shentsize * shnum;
+      fwrite(b, 1, ph_end > sh_end ? ph_end : sh_end, f);
+    } else {
+      fputs((const char *)image, f);
+    }
     fclose(f);
   }
   *m = (CUmodule)(intptr_t)(id + 1);

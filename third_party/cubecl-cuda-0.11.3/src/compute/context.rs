@@ -9,6 +9,7 @@ use cubecl_server::{
 };
 
 use crate::compiler::{CudaBackend, CudaCompilationOptions, CudaCompiler, CudaRepresentation};
+use crate::compute::background::BackgroundCompiler;
 use crate::compute::events::{EventProfiler, driver_error, poisons_device};
 use crate::compute::stream::Stream;
 use crate::install::{cccl_include_path, include_path};
@@ -61,6 +62,8 @@ pub(crate) struct CudaContext {
     pub compilation_options: CudaCompilationOptions,
     pub properties: DeviceProperties,
     build_id: StableHash,
+    /// INS-rs patch: kernels compiling on worker threads (`background.rs`).
+    background: BackgroundCompiler,
 }
 
 #[derive(Debug)]
@@ -134,7 +137,46 @@ impl CudaContext {
             compilation_options,
             properties,
             build_id: build_id_hash(),
+            background: BackgroundCompiler::new(),
         }
+    }
+
+    /// INS-rs patch: starts compiling `kernel` on a worker thread, for a launch that is
+    /// dropped ([`LaunchMode::Prepare`](cubecl_server::dry_run::LaunchMode)). Nothing to do
+    /// if it is loaded, compiling or in the PTX cache (then it is loaded now). Gives the
+    /// kernel back where the workers cannot take it (off, a precompiled source, the
+    /// compilation's source logged, the LLVM backend, a launch the device refuses): the
+    /// caller compiles it in its own thread as before.
+    pub fn compile_in_background(
+        &mut self,
+        kernel_id: &KernelId,
+        kernel: Box<dyn CubeKernel>,
+        logger: &ServerLogger,
+    ) -> Result<(), Box<dyn CubeKernel>> {
+        if self.is_loaded(kernel_id) || self.background.is_pending(kernel_id) {
+            return Ok(());
+        }
+        if !self.background.enabled()
+            || logger.compilation_source_activated()
+            || !matches!(CudaBackend::default(), CudaBackend::Cpp)
+            || kernel.source().is_some()
+            || validate_cube_dim(&self.properties, kernel_id).is_err()
+            || validate_units(&self.properties, kernel_id).is_err()
+        {
+            return Err(kernel);
+        }
+        match self.try_load_cached(kernel_id) {
+            Ok(Ok(())) => return Ok(()),
+            Ok(Err(_)) => {}
+            Err(_) => return Err(kernel),
+        }
+        let arch_option = self.arch_option();
+        self.background.start(
+            kernel_id.clone(),
+            kernel,
+            self.compilation_options.clone(),
+            arch_option,
+        )
     }
 
     /// Whether `kernel_id` is already loaded on the device.
@@ -201,6 +243,14 @@ impl CudaContext {
             Err(key) => key,
         };
 
+        // INS-rs patch: compiled on a worker when autotune prepared it (`background.rs`).
+        if let Some(done) = self.background.take(kernel_id) {
+            self.validate_shared(&done.jitc.repr)?;
+            recording.source(&done.jitc.source);
+            let ptx = Some(done.ptx);
+            return self.load_transpiled(kernel_id, key, done.jitc, ptx, logger, recording);
+        }
+
         log::trace!("Compiling kernel");
 
         validate_cube_dim(&self.properties, kernel_id)?;
@@ -233,7 +283,7 @@ impl CudaContext {
     ) -> Result<(), LaunchError> {
         match &jitc_kernel.repr {
             Some(CudaRepresentation::Cpp(_)) => {
-                self.load_transpiled(kernel_id, key, jitc_kernel, logger, recording)
+                self.load_transpiled(kernel_id, key, jitc_kernel, None, logger, recording)
             }
             Some(CudaRepresentation::Llvm(_)) => {
                 self.load_emitted_ptx(kernel_id, key, jitc_kernel, logger, recording)
@@ -244,7 +294,7 @@ impl CudaContext {
             // from the dialect and has no route for text.
             None => match CudaBackend::default() {
                 CudaBackend::Cpp => {
-                    self.load_transpiled(kernel_id, key, jitc_kernel, logger, recording)
+                    self.load_transpiled(kernel_id, key, jitc_kernel, None, logger, recording)
                 }
                 CudaBackend::Llvm => Err(CompilationError::Generic {
                     reason: "the LLVM backend cannot load a precompiled kernel: it has no text to \
@@ -321,6 +371,7 @@ impl CudaContext {
         kernel_id: &KernelId,
         key: Option<KernelCacheKey>,
         mut jitc_kernel: CompiledKernel<CudaCompiler>,
+        compiled_ptx: Option<Vec<c_char>>,
         logger: Arc<ServerLogger>,
         recording: CompilationRecording,
     ) -> Result<(), LaunchError> {
@@ -356,7 +407,10 @@ impl CudaContext {
 
         logger.log_compilation(&jitc_kernel);
 
-        let ptx = self.compile_to_ptx(&jitc_kernel.source)?;
+        let ptx = match compiled_ptx {
+            Some(ptx) => ptx,
+            None => self.compile_to_ptx(&jitc_kernel.source)?,
+        };
 
         let cube_dim = jitc_kernel.cube_dim;
         let io = jitc_kernel.io.take();
@@ -407,67 +461,15 @@ impl CudaContext {
     /// [`CompilationError::Generic`] carrying the compiler's own log, and the source that
     /// produced it, so a kernel the compiler refuses says why.
     fn compile_to_ptx(&self, source: &str) -> Result<Vec<c_char>, CompilationError> {
-        let arch = if self.arch.version >= 90 {
+        nvrtc_compile(&self.arch_option(), source)
+    }
+
+    /// NVRTC's option naming this device's architecture.
+    fn arch_option(&self) -> String {
+        if self.arch.version >= 90 {
             format!("--gpu-architecture=sm_{}a", self.arch)
         } else {
             format!("--gpu-architecture=sm_{}", self.arch)
-        };
-
-        let include_path = include_path();
-        let include_option = format!("--include-path={}", include_path.to_str().unwrap());
-        let cccl_include_path = cccl_include_path();
-        let cccl_include_option = format!("--include-path={}", cccl_include_path.to_str().unwrap());
-        let mut options = vec![arch.as_str(), include_option.as_str(), "-lineinfo"];
-        if cccl_include_path.exists() {
-            options.push(&cccl_include_option);
-        }
-        // INS-rs patch: headers parsed once per process (PATCHED.md).
-        let hoisted;
-        let source = if crate::compute::pch::nvrtc_has_pch() {
-            options.push("-pch");
-            hoisted = crate::compute::pch::includes_first(source);
-            hoisted.as_str()
-        } else {
-            source
-        };
-
-        // SAFETY: Calling NVRTC FFI to create, compile, and extract PTX from a program.
-        // The `CString` source is null-terminated and outlives the program. On compilation
-        // failure, the error log is retrieved and reported before returning.
-        unsafe {
-            // I'd like to set the name to the kernel name, but keep getting UTF-8 errors so let's
-            // leave it `None` for now
-            let c_source = CString::from_str(source).unwrap();
-            let program = cudarc::nvrtc::result::create_program(c_source.as_c_str(), None)
-                .map_err(|err| CompilationError::Generic {
-                    reason: format!("{err}"),
-                    backtrace: BackTrace::capture(),
-                })?;
-            if cudarc::nvrtc::result::compile_program(program, &options).is_err() {
-                let log_raw = cudarc::nvrtc::result::get_program_log(program).map_err(|err| {
-                    CompilationError::Generic {
-                        reason: format!("{err}"),
-                        backtrace: BackTrace::capture(),
-                    }
-                })?;
-
-                let log_ptr = log_raw.as_ptr();
-                let log = CStr::from_ptr(log_ptr).to_str().unwrap();
-                let mut message = "[Compilation Error] ".to_string();
-                for line in log.split('\n') {
-                    if !line.is_empty() {
-                        message += format!("\n    {line}").as_str();
-                    }
-                }
-                Err(CompilationError::Generic {
-                    reason: format!("{message}\n[Source]  \n{source}"),
-                    backtrace: BackTrace::capture(),
-                })?;
-            };
-            cudarc::nvrtc::result::get_ptx(program).map_err(|err| CompilationError::Generic {
-                reason: format!("{err}"),
-                backtrace: BackTrace::capture(),
-            })
         }
     }
 
@@ -604,6 +606,12 @@ fn dump_ptx(kernel_id: &KernelId, ptx: &[c_char]) {
     // ...and is long enough to blow past NAME_MAX on its own.
     let name = &name[name.len().saturating_sub(180)..];
 
+    if is_cubin(ptx) {
+        // INS-rs patch: NVRTC's CUBIN, written whole.
+        let bytes: Vec<u8> = ptx.iter().map(|&b| b as u8).collect();
+        let _ = std::fs::write(dir.join(format!("{name}.cubin")), bytes);
+        return;
+    }
     // SAFETY: the PTX handed to the driver is a null-terminated C string.
     let text = unsafe { CStr::from_ptr(ptx.as_ptr()) };
     let _ = std::fs::write(dir.join(format!("{name}.ptx")), text.to_bytes());
@@ -644,4 +652,109 @@ mod tests {
             cache_namespace("ptx_sm86", CudaBackend::Llvm, PtxVersion::for_driver(12090)),
         );
     }
+}
+
+/// Compiles `source` to PTX with NVRTC for the architecture `arch_option` names
+/// (`--gpu-architecture=…`). A free function (INS-rs patch) so that worker threads call it too
+/// (`background.rs`).
+///
+/// # Errors
+///
+/// [`CompilationError::Generic`] carrying the compiler's own log, and the source that
+/// produced it, so a kernel the compiler refuses says why.
+pub(crate) fn nvrtc_compile(
+    arch_option: &str,
+    source: &str,
+) -> Result<Vec<c_char>, CompilationError> {
+    let include_path = include_path();
+    let include_option = format!("--include-path={}", include_path.to_str().unwrap());
+    let cccl_include_path = cccl_include_path();
+    let cccl_include_option = format!("--include-path={}", cccl_include_path.to_str().unwrap());
+    let mut options = vec![arch_option, include_option.as_str(), "-lineinfo"];
+    if cccl_include_path.exists() {
+        options.push(&cccl_include_option);
+    }
+    // INS-rs patch: headers parsed once per process (PATCHED.md).
+    let hoisted;
+    let source = if crate::compute::pch::nvrtc_has_pch() {
+        options.push("-pch");
+        hoisted = crate::compute::pch::includes_first(source);
+        hoisted.as_str()
+    } else {
+        source
+    };
+
+    // SAFETY: Calling NVRTC FFI to create, compile, and extract PTX from a program.
+    // The `CString` source is null-terminated and outlives the program. On compilation
+    // failure, the error log is retrieved and reported before returning.
+    unsafe {
+        // I'd like to set the name to the kernel name, but keep getting UTF-8 errors so let's
+        // leave it `None` for now
+        let c_source = CString::from_str(source).unwrap();
+        let program =
+            cudarc::nvrtc::result::create_program(c_source.as_c_str(), None).map_err(|err| {
+                CompilationError::Generic {
+                    reason: format!("{err}"),
+                    backtrace: BackTrace::capture(),
+                }
+            })?;
+        if cudarc::nvrtc::result::compile_program(program, &options).is_err() {
+            let log_raw = cudarc::nvrtc::result::get_program_log(program).map_err(|err| {
+                CompilationError::Generic {
+                    reason: format!("{err}"),
+                    backtrace: BackTrace::capture(),
+                }
+            })?;
+
+            let log_ptr = log_raw.as_ptr();
+            let log = CStr::from_ptr(log_ptr).to_str().unwrap();
+            let mut message = "[Compilation Error] ".to_string();
+            for line in log.split('\n') {
+                if !line.is_empty() {
+                    message += format!("\n    {line}").as_str();
+                }
+            }
+            Err(CompilationError::Generic {
+                reason: format!("{message}\n[Source]  \n{source}"),
+                backtrace: BackTrace::capture(),
+            })?;
+        };
+        // INS-rs patch: compiled for the device's own architecture (`sm_…`), NVRTC has already
+        // assembled the kernel; its CUBIN loads as is, where the PTX had the driver assemble
+        // every module again, one at a time in the launching thread, on a cold start.
+        if let Some(cubin) = cubin(program) {
+            return Ok(cubin);
+        }
+        cudarc::nvrtc::result::get_ptx(program).map_err(|err| CompilationError::Generic {
+            reason: format!("{err}"),
+            backtrace: BackTrace::capture(),
+        })
+    }
+}
+
+/// INS-rs patch: the machine code NVRTC made for `program`, if it made any and
+/// `CUBECL_NVRTC_CUBIN=0` does not ask for PTX.
+///
+/// # Safety
+///
+/// `program` was compiled successfully and not destroyed.
+unsafe fn cubin(program: cudarc::nvrtc::sys::nvrtcProgram) -> Option<Vec<c_char>> {
+    use cudarc::nvrtc::sys::{nvrtcGetCUBIN, nvrtcGetCUBINSize, nvrtcResult::NVRTC_SUCCESS};
+    if std::env::var("CUBECL_NVRTC_CUBIN").is_ok_and(|v| v == "0") {
+        return None;
+    }
+    let mut size = 0usize;
+    // SAFETY: `program` compiled (the caller's promise); the buffer holds `size` bytes.
+    unsafe {
+        if nvrtcGetCUBINSize(program, &mut size) != NVRTC_SUCCESS || size == 0 {
+            return None;
+        }
+        let mut cubin = vec![0 as c_char; size];
+        (nvrtcGetCUBIN(program, cubin.as_mut_ptr()) == NVRTC_SUCCESS).then_some(cubin)
+    }
+}
+
+/// Whether a module's bytes are machine code (an ELF CUBIN) rather than PTX text.
+fn is_cubin(module: &[c_char]) -> bool {
+    module.len() > 4 && module[..4].iter().map(|&b| b as u8).eq(*b"\x7fELF")
 }

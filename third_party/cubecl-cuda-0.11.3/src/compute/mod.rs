@@ -1,3 +1,4 @@
+pub(crate) mod background;
 pub(crate) mod capture;
 pub(crate) mod communication;
 pub(crate) mod context;

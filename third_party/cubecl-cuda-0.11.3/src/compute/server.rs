@@ -187,6 +187,17 @@ impl Server for CudaServer {
         launch_mode: LaunchMode,
     ) {
         let kernel_id = kernel.id();
+        // INS-rs patch: a launch autotune prepares starts its kernel compiling on a worker and
+        // is dropped (`background.rs`); a kernel the workers cannot take compiles here.
+        let kernel = if launch_mode.is_prepare() {
+            let logger = self.streams.logger.clone();
+            match self.ctx.compile_in_background(&kernel_id, kernel, &logger) {
+                Ok(()) => return,
+                Err(kernel) => kernel,
+            }
+        } else {
+            kernel
+        };
         if self.compile_failed(&kernel_id, kernel, &bindings, stream_id, launch_mode) {
             return;
         }
