@@ -165,8 +165,12 @@ impl CudaContext {
         {
             return Err(kernel);
         }
+        let recording = CompilationRecording::new(kernel_id);
         match self.try_load_cached(kernel_id) {
-            Ok(Ok(())) => return Ok(()),
+            Ok(Ok(())) => {
+                recording.loaded();
+                return Ok(());
+            }
             Ok(Err(_)) => {}
             Err(_) => return Err(kernel),
         }
