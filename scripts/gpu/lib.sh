@@ -67,3 +67,10 @@ restore_vgg() { # the converted VGG-16 weights where the binary looks for them (
   truncate -s "$size" "$onnx"; touch -d "${mtime//_/ }" "$onnx"
   export INS_CACHE_DIR=$(dirname "$(dirname "$onnx")")
 }
+missing_rows() { # missing_rows BACKEND WORKLOAD...: those with no benchmark line in the log yet
+  local backend=$1 w; shift
+  sleep 1 # tee may still be writing the stage's last lines
+  for w in "$@"; do
+    grep -q "\"backend\":\"$backend\".*\"workload\":\"$w\"" "$OUT/log.txt" || printf '%s ' "$w"
+  done
+}

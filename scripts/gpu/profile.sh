@@ -2,7 +2,8 @@
 # Where a GPU step's time goes (issue 48), for the second call of a GPU session after check.sh.
 # Run on the device machine from the repository root with .dev and .gl carried (pack.sh).
 # - Kernel by kernel (CubeCL's profile, summed by profile_summary.py): VGG, the largest gap to
-#   PyTorch (siren's step is mostly VGG), on wgpu and on CUDA; a grid NeRF step on CUDA.
+#   PyTorch (siren's step is mostly VGG), on wgpu and on CUDA; a grid NeRF step, and the
+#   NeRF pretraining and stylization steps PyTorch's reference also runs, on CUDA.
 # - Sphere tracing's share: an IDR stylization traces its patch's rays against the frozen
 #   surface every step (off a CPU its rounds on the device, four reads a trace); its metrics
 #   log the tracing's wall time (`trace_ms`) beside the step's (`ms`).
@@ -18,6 +19,8 @@ profiled() { # profiled NAME TIMEOUT args...: the run with CubeCL's kernel profi
   local name=$1 to=$2; shift 2
   stage "$name" "$to" env CUBECL_DEBUG_LOG=/tmp/$name.log CUBECL_DEBUG_OPTION=profile "$@"
   python3 scripts/gpu/profile_summary.py /tmp/$name.log > "$OUT/$name.txt" 2>&1
+  # The raw lines too, should the summary miss any (xz through Python: the machine may lack xz).
+  python3 -c "import lzma,shutil; shutil.copyfileobj(open('/tmp/$name.log','rb'), lzma.open('$OUT/$name.log.xz','wb'))"
   head -18 "$OUT/$name.txt"
 }
 step_times() { # step_times RUN: median ms a step and median trace_ms over the run's logged steps
@@ -34,6 +37,8 @@ stamp "setup done"
 profiled prof_vgg_wgpu 60 $BIN bench --backend wgpu --steps 2 vgg
 profiled prof_vgg_cuda 60 $BIN bench --backend cuda --steps 2 vgg
 profiled prof_nerf_grid_cuda 60 $BIN bench --backend cuda --steps 2 nerf-grid
+# The NeRF workloads PyTorch also runs (its MLP's matmuls, the sampling and compositing kernels).
+profiled prof_nerf_cuda 60 $BIN bench --backend cuda --steps 2 nerf-pretrain nerf-stylize
 stage synth 20 $BIN data synth --format dtu --out /tmp/dtu --size 128 --views 16
 for backend in cuda wgpu; do
   stage idr_pretrain_$backend 60 $BIN train idr --scene /tmp/dtu --steps 300 --eval-every 0 \
