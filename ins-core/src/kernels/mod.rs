@@ -17,6 +17,8 @@
 //!   GPU backends; [`jitter`]: their uniform numbers, hashed from a counter.
 //! - [`merge_sorted`]: two sorted sets of ray samples merged by one kernel on the GPU backends.
 //! - [`section_weights`]: NeuS's section weights as one kernel a pass on the GPU backends.
+//! - [`ranked_picks`]: the smoothness term's picks among flagged samples as one kernel on the
+//!   GPU backends.
 //! - [`hash_grid`]: the multiresolution hash encoding on slices, as CubeCL kernels, and as a
 //!   Burn op with both backwards.
 
@@ -31,6 +33,7 @@ pub mod gram;
 pub mod hash_grid;
 pub mod jitter;
 pub mod merge_sorted;
+pub mod ranked_picks;
 pub mod samplers;
 pub mod section_weights;
 pub mod sine;

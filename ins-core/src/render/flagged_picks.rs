@@ -7,11 +7,16 @@
 //! scattered into a rank → entry table, and `k` ranks are read from it: all of them when at
 //! most `k` are flagged, else one from each of `k` equal strata of the ranks, at an offset drawn
 //! on the host. The arithmetic is integer throughout, so every backend picks the same entries.
+//! On the GPU backends one kernel does it ([`crate::kernels::ranked_picks`]): each pick finds the
+//! entry of its rank by a binary search of the running sum, with no table.
 
 use burn::prelude::*;
 use burn::tensor::IndexingUpdateOp;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
+
+use crate::kernels::cube_f32;
+use crate::kernels::ranked_picks::op::ranked_picks_op;
 
 /// The resolution of a pick's place inside its stratum.
 const OFFSET_STEPS: i64 = 1024;
@@ -31,6 +36,15 @@ pub fn pick_flagged(flags: Tensor<1>, k: usize, seed: u64) -> (Tensor<1, Int>, T
     let device = flags.device();
     let flags = flags.detach();
     let counts = flags.clone().cumsum(0); // [N]: flagged entries up to and including each
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let u: Vec<i64> = (0..k).map(|_| rng.random_range(0..OFFSET_STEPS)).collect();
+    if n < 1 << 24 && cube_f32(&device, &[counts.dtype()]) {
+        // One kernel on the GPU backends: the same ranks, each entry found by a binary search
+        // of the running count (counts and entries exact in f32 below 2²⁴).
+        let offsets: Vec<f32> = u.iter().map(|&o| o as f32).collect();
+        let offsets = Tensor::<1>::from_floats(offsets.as_slice(), &device);
+        return ranked_picks_op(counts, offsets, OFFSET_STEPS as u32);
+    }
     let total = counts.clone().slice([n - 1..n]).int().expand([k]);
     // Rank of each flagged entry; the others go to a spare slot N, adding 0 there.
     let flagged = flags.clone().int();
@@ -44,8 +58,6 @@ pub fn pick_flagged(flags: Tensor<1>, k: usize, seed: u64) -> (Tensor<1, Int>, T
         a.clone() * total.clone().div_scalar(b)
             + (a * total.clone().remainder_scalar(b)).div_scalar(b)
     };
-    let mut rng = SmallRng::seed_from_u64(seed);
-    let u: Vec<i64> = (0..k).map(|_| rng.random_range(0..OFFSET_STEPS)).collect();
     let u = Tensor::<1, Int>::from_data(TensorData::new(u, [k]), &device);
     let i = Tensor::<1, Int>::arange(0..k as i64, &device);
     // ⌊(i·T + o)/k⌋ = i·⌊T/k⌋ + ⌊(i·(T mod k) + o)/k⌋, with o = ⌊u·T/1024⌋ < T.

@@ -188,8 +188,9 @@ fn ray_samples_merge_on_wgpu_as_the_host_sorts() {
     assert!(ties > rows, "only {ties} ties: the rows test little");
 }
 
-/// The smoothness term's picks among the samples seen, made on the device, are the host's
-/// exactly (integer arithmetic): with fewer flagged than picks and with more.
+/// The smoothness term's picks among the samples seen, made on the device (one kernel: ranks
+/// and a binary search), are the host's ops' exactly (integer arithmetic): with fewer flagged
+/// than picks, as many, more, and none.
 #[test]
 fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
     use ins_core::render::flagged_picks::pick_flagged;
@@ -197,9 +198,10 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
         .map(|j| (j % 7 == 0 || j % 11 == 3) as u8 as f32)
         .collect();
     let on = move |device: &Device| -> Vec<(Vec<i64>, Vec<f32>)> {
-        [64, 1024]
+        [(64, 1.0), (663, 1.0), (1024, 1.0), (16, 0.0)]
             .into_iter()
-            .map(|k| {
+            .map(|(k, on)| {
+                let flags: Vec<f32> = flags.iter().map(|f| f * on).collect();
                 let (index, weight) =
                     pick_flagged(Tensor::<1>::from_floats(flags.as_slice(), device), k, 5);
                 let index = index.into_data().convert::<i64>();
@@ -214,10 +216,11 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
         move || on(&BackendChoice::Wgpu.device()),
     );
     assert_eq!(
-        flex[1].1.iter().sum::<f32>(),
+        flex[2].1.iter().sum::<f32>(),
         663.0,
         "all 663 flagged, then fillers"
     );
+    assert_eq!(flex[3], (vec![0; 16], vec![0.0; 16]), "nothing flagged");
     assert_eq!(wgpu, flex, "the picks differ from the host's");
 }
 
