@@ -21,7 +21,7 @@ use rayon::prelude::*;
 
 use crate::kernels::dense::dense_with;
 use crate::kernels::dense_bf16::{
-    self, MAX_COLUMNS, ROW_CHUNK, available, pack_pairs, product_packed, row_as_pairs,
+    self, MAX_COLUMNS, ROW_CHUNK, available, pack_panels, product_packed, row_as_pairs,
 };
 use crate::kernels::flex::product_on;
 
@@ -72,7 +72,7 @@ pub fn forward(x: &[f32], n: usize, layers: &[HostLayer]) -> Vec<f32> {
         .iter()
         .map(|l| {
             dense_bf16::worth_it(l.o)
-                .then(|| pack_pairs(l.w, [l.i, l.o], l.o, l.o.div_ceil(16) * 16))
+                .then(|| pack_panels(l.w, [l.i, l.o], l.o))
         })
         .collect();
     let max_pairs = layers.iter().map(|l| l.i.div_ceil(2)).max().unwrap_or(1);
