@@ -193,7 +193,12 @@ pub(super) fn pack_panels(src: &[f32], [k, n]: [usize; 2], stride: usize) -> Vec
     let mut out = Vec::with_capacity(k.div_ceil(2) * n.div_ceil(16) * 16);
     for c0 in (0..n).step_by(PANEL) {
         let cols = PANEL.min(n - c0);
-        out.extend(pack_pairs(&src[c0..], [k, cols], stride, cols.div_ceil(16) * 16));
+        out.extend(pack_pairs(
+            &src[c0..],
+            [k, cols],
+            stride,
+            cols.div_ceil(16) * 16,
+        ));
     }
     out
 }

@@ -70,10 +70,7 @@ pub fn forward(x: &[f32], n: usize, layers: &[HostLayer]) -> Vec<f32> {
     // Packed weights of the layers whose products run in bf16.
     let packed: Vec<Option<Vec<u32>>> = layers
         .iter()
-        .map(|l| {
-            dense_bf16::worth_it(l.o)
-                .then(|| pack_panels(l.w, [l.i, l.o], l.o))
-        })
+        .map(|l| dense_bf16::worth_it(l.o).then(|| pack_panels(l.w, [l.i, l.o], l.o)))
         .collect();
     let max_pairs = layers.iter().map(|l| l.i.div_ceil(2)).max().unwrap_or(1);
     let max_o = layers.iter().map(|l| l.o).max().unwrap_or(1);
