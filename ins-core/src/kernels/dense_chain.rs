@@ -21,9 +21,12 @@ use rayon::prelude::*;
 
 use crate::kernels::dense::dense_with;
 use crate::kernels::dense_bf16::{
-    self, MAX_COLUMNS, ROW_CHUNK, available, pack_panels, product_packed, row_as_pairs,
+    self, ROW_CHUNK, available, pack_panels, product_packed, row_as_pairs,
 };
 use crate::kernels::flex::product_on;
+
+/// Widest output (columns) of a layer in the fused chain; wider layers run one by one.
+pub const MAX_COLUMNS: usize = 64;
 
 /// One layer of a chain on the host: `w [i, o]` (row-major, Burn's layout), `bias [o]`, and
 /// whether a ReLU follows.
