@@ -45,8 +45,8 @@ pub struct VggArgs {
     /// Arithmetic of the VGG convolutions: f32; bf16 (BF16 products with f32 sums on Intel AMX
     /// or by AVX-512 BF16, on flex; f32 on CPUs with neither); or f16 (Burn's convolution in
     /// half precision on a wgpu adapter with f16 shaders; f32 elsewhere). Default: bf16 where
-    /// the CPU has either, else f32. f32 also keeps a NeRF field's products in f32 (bf16 by
-    /// default where the CPU has AVX-512 BF16).
+    /// the CPU has either, else f32. f32 also keeps the dense products of a NeRF field and of
+    /// SIREN's hidden layers in f32 (bf16 by default where the CPU has AVX-512 BF16).
     #[arg(long, value_name = "P")]
     pub precision: Option<Precision>,
 }
@@ -57,8 +57,9 @@ impl VggArgs {
         self.precision.unwrap_or(Precision::Bf16.effective())
     }
 
-    /// `--precision f32` keeps a NeRF field's dense products in f32 too (else bf16 where the
-    /// CPU has AVX-512 BF16), on this thread for the rest of the command.
+    /// `--precision f32` keeps the dense products of a NeRF field and of SIREN's hidden layers
+    /// in f32 too (else bf16 where the CPU has AVX-512 BF16), on this thread for the rest of
+    /// the command.
     pub fn apply_to_products(&self) {
         if self.precision == Some(Precision::F32) {
             std::mem::forget(ins_core::kernels::dense_bf16::forbid());
