@@ -176,8 +176,11 @@ fn conv_gemm(
                 o.iter_mut().for_each(|v| *v += bias[row]);
             }
             if relu {
-                // NaN stays NaN (a diverging loss must still be seen).
-                o.iter_mut().filter(|v| **v < 0.0).for_each(|v| *v = 0.0);
+                // A select, not a branch, so that it runs 16 lanes at a time (the filtered
+                // loop was scalar and mispredicted on every other value: a fifteenth of a
+                // `vgg` step). NaN stays NaN (a diverging loss must still be seen).
+                o.iter_mut()
+                    .for_each(|v| *v = if *v < 0.0 { 0.0 } else { *v });
             }
         }
     };

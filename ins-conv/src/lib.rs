@@ -14,12 +14,14 @@ pub mod geometry;
 pub mod im2col;
 pub mod kernel_cache;
 pub mod kernel_matrix;
+pub mod max_pool;
 pub mod op;
 pub mod reference;
 pub mod vnni_im2col;
 
 pub use engine::Engine;
 pub use geometry::ConvGeometry;
+pub use max_pool::max_pool_2x2;
 pub use op::{conv2d, half_device, kernel_device};
 
 /// The arithmetic of a network's convolutions, as a user picks it (`--precision`).

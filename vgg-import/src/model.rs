@@ -4,8 +4,8 @@ use burn::module::Param;
 use burn::prelude::*;
 use burn::tensor::FloatDType;
 use burn::tensor::activation::relu;
-use burn::tensor::module::{conv2d, max_pool2d};
-use burn::tensor::ops::{ConvOptions, MaxPoolOptions};
+use burn::tensor::module::conv2d;
+use burn::tensor::ops::ConvOptions;
 
 use ins_conv::op::ConvParams;
 use ins_conv::{Engine, Precision};
@@ -168,7 +168,7 @@ impl Vgg16Features {
             }
         };
         let out = |x: Tensor<4>| if half { x.cast(FloatDType::F32) } else { x };
-        let pool = |x: Tensor<4>| max_pool2d(x, MaxPoolOptions::new([2, 2]).with_stride([2, 2]));
+        let pool = ins_conv::max_pool_2x2;
         let x = conv(0, x);
         let relu1_2 = conv(1, x);
         let x = conv(2, pool(relu1_2.clone()));
