@@ -10,6 +10,7 @@
 
 #![allow(deprecated)]
 
+use crate::op::{tensor, values};
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
@@ -17,8 +18,7 @@ use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::flex::FlexTensor;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
-    Autodiff, AutodiffBackend, Backend, DType, Dispatch, Flex, TensorData, TensorMetadata,
-    backend_extension,
+    Autodiff, AutodiffBackend, Backend, DType, Dispatch, Flex, TensorMetadata, backend_extension,
 };
 use burn::prelude::*;
 use burn::tensor::module::max_pool2d;
@@ -47,6 +47,15 @@ fn scan(t: &[f32], b: &[f32]) -> (f32, u32) {
     (m, k)
 }
 
+/// The two input rows under output row `r` of a `[h, w]` plane, each cut to the `2·wo`
+/// values the windows cover.
+fn rows(plane: &[f32], w: usize, wo: usize, r: usize) -> (&[f32], &[f32]) {
+    (
+        &plane[2 * r * w..][..2 * wo],
+        &plane[(2 * r + 1) * w..][..2 * wo],
+    )
+}
+
 /// The output's height and width: a last odd row or column is dropped, as by Flex.
 fn pooled([h, w]: [usize; 2]) -> [usize; 2] {
     [h / 2, w / 2]
@@ -64,10 +73,7 @@ pub fn forward(x: &[f32], [planes, h, w]: [usize; 3]) -> Vec<f32> {
         .zip(x.par_chunks(h * w))
         .for_each(|(o, plane)| {
             for (r, o) in o.chunks_exact_mut(wo).enumerate() {
-                let (top, bottom) = (
-                    &plane[2 * r * w..][..2 * wo],
-                    &plane[(2 * r + 1) * w..][..2 * wo],
-                );
+                let (top, bottom) = rows(plane, w, wo, r);
                 for ((o, t), b) in o
                     .iter_mut()
                     .zip(top.chunks_exact(2))
@@ -99,10 +105,7 @@ pub fn backward(x: &[f32], grad: &[f32], [planes, h, w]: [usize; 3]) -> Vec<f32>
         .zip(grad.par_chunks(ho * wo))
         .for_each(|((o, plane), g)| {
             for (r, g) in g.chunks_exact(wo).enumerate() {
-                let (top, bottom) = (
-                    &plane[2 * r * w..][..2 * wo],
-                    &plane[(2 * r + 1) * w..][..2 * wo],
-                );
+                let (top, bottom) = rows(plane, w, wo, r);
                 let (ot, ob) = o[2 * r * w..(2 * r + 2) * w].split_at_mut(w);
                 let windows = top.chunks_exact(2).zip(bottom.chunks_exact(2));
                 let outs = ot.chunks_exact_mut(2).zip(ob.chunks_exact_mut(2));
@@ -133,29 +136,17 @@ fn planes(t: &impl TensorMetadata) -> [usize; 3] {
     [s[0] * s[1], s[2], s[3]]
 }
 
-fn contiguous(t: &FlexTensor) -> FlexTensor {
-    assert_eq!(t.dtype(), DType::F32, "the max pool runs in f32");
-    t.to_contiguous()
-}
-
-fn slice(t: &FlexTensor) -> &[f32] {
-    t.as_slice::<f32>().expect("contiguous f32")
-}
-
 impl MaxPoolOps for Flex {
     fn ins_max_pool_2x2(x: FlexTensor) -> FlexTensor {
-        let x = contiguous(&x);
         let (s, p) = (x.shape(), planes(&x));
         let [ho, wo] = pooled([p[1], p[2]]);
-        let y = forward(slice(&x), p);
-        FlexTensor::from_data(TensorData::new(y, [s[0], s[1], ho, wo]))
+        tensor(values(&x, |x| forward(x, p)), [s[0], s[1], ho, wo])
     }
 
     fn ins_max_pool_2x2_grad(x: FlexTensor, grad: FlexTensor) -> FlexTensor {
-        let (x, grad) = (contiguous(&x), contiguous(&grad));
-        let s = x.shape();
-        let g = backward(slice(&x), slice(&grad), planes(&x));
-        FlexTensor::from_data(TensorData::new(g, [s[0], s[1], s[2], s[3]]))
+        let (s, p) = (x.shape(), planes(&x));
+        let g = values(&x, |x| values(&grad, |grad| backward(x, grad, p)));
+        tensor(g, [s[0], s[1], s[2], s[3]])
     }
 }
 

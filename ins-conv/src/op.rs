@@ -124,8 +124,9 @@ pub trait ConvOps: Backend {
     ) -> FloatTensor<Self>;
 }
 
-fn values<R>(t: &FlexTensor, f: impl FnOnce(&[f32]) -> R) -> R {
-    assert_eq!(t.dtype(), DType::F32, "the convolution runs in f32");
+/// `t`'s values, contiguous, to `f` (the crate's ops, the convolution and the max pool, run in f32).
+pub(crate) fn values<R>(t: &FlexTensor, f: impl FnOnce(&[f32]) -> R) -> R {
+    assert_eq!(t.dtype(), DType::F32, "ins-conv's ops run in f32");
     let t = t.to_contiguous();
     f(t.as_slice::<f32>().expect("contiguous f32"))
 }
@@ -150,7 +151,7 @@ fn kernel_matrix(
     }
 }
 
-fn tensor(values: Vec<f32>, shape: [usize; 4]) -> FlexTensor {
+pub(crate) fn tensor(values: Vec<f32>, shape: [usize; 4]) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, shape))
 }
 
