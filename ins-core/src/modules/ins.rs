@@ -11,6 +11,7 @@ use burn::tensor::activation::sigmoid;
 use super::am::{Amalgamation, AmalgamationConfig};
 use super::cim::ContentModule;
 use super::sim::{Sim, SimConfig};
+use crate::kernels::{dense::dense, dense_bf16};
 use crate::train::groups::{GroupSpec, Optimizable};
 
 /// SIM + CIM + AM + linear RGB head with a sigmoid.
@@ -49,27 +50,21 @@ impl<C: ContentModule> Ins<C> {
 
     /// `coords [P, d]`, `codes [S, n_styles]` → RGB in [0, 1], `[S, P, 3]`.
     ///
-    /// The content features are computed once and shared by every style in the batch.
+    /// The content features are computed once and shared by every style in the batch. The
+    /// AM's `[P, 256] → 256` product runs in bf16 on flex where the CPU has AVX-512 BF16 (unless
+    /// `--precision f32` or `INS_DISABLE_BF16` says otherwise), as the CIM's hidden layers do:
+    /// it was a sixth of a stylizing step in f32 (docs/measurements.md); the SIM and the head
+    /// stay f32.
     pub fn forward(&self, coords: Tensor<2>, codes: Tensor<2>) -> Tensor<3> {
         let [p, _] = coords.dims();
         let [s, _] = codes.dims();
         let f = self.cim.features(coords);
-        let d_f = f.dims()[1];
         let style = self.sim.forward(codes, None);
-        let d_s = style.dims()[1];
-        let (f, style) = if s == 1 {
-            (f, style.expand([p, d_s]))
-        } else {
-            (
-                f.unsqueeze::<3>().expand([s, p, d_f]).reshape([s * p, d_f]),
-                style
-                    .reshape([s, 1, d_s])
-                    .expand([s, p, d_s])
-                    .reshape([s * p, d_s]),
-            )
+        let h = {
+            let _precision = dense_bf16::scope(true);
+            self.am.forward(f, style)
         };
-        let h = self.am.forward(f, style);
-        sigmoid(self.head.forward(h)).reshape([s, p, 3])
+        sigmoid(dense(&self.head, h)).reshape([s, p, 3])
     }
 }
 
@@ -82,5 +77,66 @@ impl<C: ContentModule> Optimizable for Ins<C> {
             GroupSpec::new("am", &["am"]),
             GroupSpec::new("head", &["head"]),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::modules::cim::SirenCimConfig;
+    use burn::module::Param;
+    use burn::tensor::Distribution;
+
+    fn host(t: Tensor<3>) -> Vec<f32> {
+        t.into_data().try_to_vec::<f32>().unwrap()
+    }
+
+    /// The AM's product runs in bf16 (where the CPU has AVX-512 BF16), exactly as a scope
+    /// around the AM alone gives it, and in f32 under `forbid`; the content features and the
+    /// head are not moved by it.
+    #[test]
+    fn the_am_product_runs_in_bf16_and_f32_under_forbid() {
+        if !dense_bf16::available() {
+            eprintln!("no AVX-512 BF16 here: nothing runs in bf16");
+            return;
+        }
+        let d = Device::flex();
+        d.seed(4);
+        let cim = SirenCimConfig::new()
+            .with_d_hidden(64)
+            .with_depth(2)
+            .init(&d);
+        let mut ins = Ins::new(cim, &SimConfig::new(2).with_d_hidden(16), true, &d);
+        // γ away from 1, so the AM's product reaches the colour.
+        ins.am.gamma = Param::from_tensor(Tensor::from_floats([0.4], &d));
+        let x = Tensor::<2>::random([90, 2], Distribution::Uniform(-1.0, 1.0), &d);
+        let codes = Tensor::<2>::from_floats([[1.0, 0.0], [0.3, 0.7]], &d);
+        let composed = |am_bf16: bool| {
+            let f = ins.cim.features(x.clone());
+            let style = ins.sim.forward(codes.clone(), None);
+            let h = {
+                let _p = dense_bf16::scope(am_bf16);
+                ins.am.forward(f, style)
+            };
+            sigmoid(dense(&ins.head, h)).reshape([2, 90, 3])
+        };
+        let mixed = host(ins.forward(x.clone(), codes.clone()));
+        assert_eq!(mixed, host(composed(true)), "the AM not in bf16");
+        let f32_am = host(composed(false));
+        let err = mixed
+            .iter()
+            .zip(&f32_am)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(err > 0.0 && err < 0.01, "bf16 AM against f32: {err}");
+        let forbidden = {
+            let _f32 = dense_bf16::forbid();
+            host(ins.forward(x.clone(), codes.clone()))
+        };
+        let all_f32 = {
+            let _f32 = dense_bf16::forbid();
+            host(composed(true))
+        };
+        assert_eq!(forbidden, all_f32, "forbid left the AM in bf16");
     }
 }
