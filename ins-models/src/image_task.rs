@@ -159,10 +159,8 @@ impl<C: ContentModule> ImageTask<C> {
         };
         let (coords, target) = self.gather(&idx);
         // The fitting phase freezes SIM and AM (see `SirenRunConfig::phases`): the AM stays the
-        // identity, so any one code renders the content and every style starts from it.
-        let rgb = model.forward(coords, self.perceptual.codes.clone().slice([0..1]));
-        let [_, p, _] = rgb.dims();
-        let loss = mse(rgb.reshape([p, 3]), target);
+        // identity, so the content path alone renders what every style starts from.
+        let loss = mse(model.forward_content(coords), target);
         Ok(LossTerms::default()
             .term("mse", loss)
             .metric_of("psnr", "mse", psnr))

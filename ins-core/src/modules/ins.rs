@@ -66,6 +66,13 @@ impl<C: ContentModule> Ins<C> {
         };
         sigmoid(dense(&self.head, h)).reshape([s, p, 3])
     }
+
+    /// `coords [P, d]` → RGB `[P, 3]` through the content path alone (CIM and head): what
+    /// [`Ins::forward`] gives, bit for bit, while the AM is the identity (γ = 1, as through the
+    /// fitting phase, which freezes it), without the SIM's and the AM's work.
+    pub fn forward_content(&self, coords: Tensor<2>) -> Tensor<2> {
+        sigmoid(dense(&self.head, self.cim.features(coords)))
+    }
 }
 
 impl<C: ContentModule> Optimizable for Ins<C> {
@@ -83,7 +90,7 @@ impl<C: ContentModule> Optimizable for Ins<C> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::modules::cim::SirenCimConfig;
+    use crate::modules::cim::{SirenCim, SirenCimConfig};
     use burn::module::Param;
     use burn::tensor::Distribution;
 
@@ -138,5 +145,38 @@ mod tests {
             host(composed(true))
         };
         assert_eq!(forbidden, all_f32, "forbid left the AM in bf16");
+    }
+
+    /// While the AM is the identity (γ = 1), the content path alone gives `forward`'s colours
+    /// and the content module's gradients bit for bit; with γ moved it does not.
+    #[test]
+    fn the_content_path_is_forward_while_the_am_is_the_identity() {
+        let d = Device::flex().autodiff();
+        d.seed(5);
+        let cim = SirenCimConfig::new()
+            .with_d_hidden(64)
+            .with_depth(2)
+            .init(&d);
+        let mut ins = Ins::new(cim, &SimConfig::new(1).with_d_hidden(16), true, &d);
+        let x = Tensor::<2>::random([50, 2], Distribution::Uniform(-1.0, 1.0), &d);
+        let code = Tensor::<2>::from_floats([[1.0]], &d);
+        let target = Tensor::<2>::random([50, 3], Distribution::Default, &d);
+        let run = |ins: &Ins<SirenCim>, whole: bool| {
+            let rgb = if whole {
+                ins.forward(x.clone(), code.clone()).reshape([50, 3])
+            } else {
+                ins.forward_content(x.clone())
+            };
+            let grads = (rgb.clone() - target.clone()).square().sum().backward();
+            let w = ins.cim.layers[1].linear.weight.val();
+            let g = w.grad(&grads).expect("the CIM has a gradient");
+            (
+                host(rgb.unsqueeze()),
+                g.into_data().try_to_vec::<f32>().unwrap(),
+            )
+        };
+        assert_eq!(run(&ins, true), run(&ins, false), "γ = 1");
+        ins.am.gamma = Param::from_tensor(Tensor::from_floats([0.9], &d));
+        assert_ne!(run(&ins, true).0, run(&ins, false).0, "γ = 0.9");
     }
 }
