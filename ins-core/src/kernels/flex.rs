@@ -93,12 +93,21 @@ pub(crate) unsafe fn written<const D: usize>(
     shape: [usize; D],
     fill: impl FnOnce(*mut f32),
 ) -> FlexTensor {
-    let len = shape.iter().product();
+    // SAFETY: the caller's promise.
+    let out = unsafe { written_vec(shape.iter().product(), fill) };
+    FlexTensor::from_data(TensorData::new(out, shape))
+}
+
+/// [`written`]'s values alone: `len` values that `fill` writes in full (not zeroed first).
+///
+/// # Safety
+/// `fill` must write every one of the `len` elements.
+pub(crate) unsafe fn written_vec(len: usize, fill: impl FnOnce(*mut f32)) -> Vec<f32> {
     let mut out = Vec::<f32>::with_capacity(len);
     fill(out.as_mut_ptr());
     // SAFETY: the caller's promise.
     unsafe { out.set_len(len) };
-    FlexTensor::from_data(TensorData::new(out, shape))
+    out
 }
 
 /// The f32 values of a contiguous tensor.

@@ -17,7 +17,7 @@ use burn::backend::{
 };
 use burn::prelude::*;
 
-use crate::kernels::flex::{product, product_on, values, written};
+use crate::kernels::flex::{product, product_on, values, written, written_vec};
 
 /// The Gram matrix and its gradient as backend operations.
 #[backend_extension(Flex, Autodiff)]
@@ -130,25 +130,14 @@ fn split_sum(f: &[f32], [b, c, p]: [usize; 3], scale: f32, shares: usize) -> Fle
                 }
             })
             .collect();
-        let mut sum = partials[0].clone();
-        for part in &partials[1..] {
-            sum.iter_mut().zip(part).for_each(|(a, b)| *a += b);
+        let mut partials = partials.into_iter();
+        let mut sum = partials.next().expect("at least one share");
+        for part in partials {
+            sum.iter_mut().zip(&part).for_each(|(a, b)| *a += b);
         }
         out.extend_from_slice(&sum);
     }
     FlexTensor::from_data(TensorData::new(out, [b, c, c]))
-}
-
-/// A vector of `len` values that `fill` writes in full.
-///
-/// # Safety
-/// `fill` must write every one of the `len` elements.
-unsafe fn written_vec(len: usize, fill: impl FnOnce(*mut f32)) -> Vec<f32> {
-    let mut out = Vec::<f32>::with_capacity(len);
-    fill(out.as_mut_ptr());
-    // SAFETY: the caller's promise.
-    unsafe { out.set_len(len) };
-    out
 }
 
 #[derive(Debug)]
