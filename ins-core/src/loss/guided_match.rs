@@ -6,10 +6,14 @@
 //! features; 4096 × 7396 at relu1_2 of a 64² patch, 121 MB each): both similarity matrices, the
 //! photo's allowed set, their sum, each written and read again by the next op. Here a block of
 //! 32 positions takes both similarity rows (two products by `gemm`) while they sit in the cache
-//! and keeps only the winner's index.
+//! and keeps only the winner's index. With `bf16` the products round their operands to bf16
+//! (`VDPBF16PS`, twice the multiply-adds of f32's FMA; the features come out of bf16
+//! convolutions already): matches whose cosines tie within that rounding may pick another of
+//! the tied features.
 
 use rayon::prelude::*;
 
+use crate::kernels::dense_bf16::columns as bf16_columns;
 use crate::kernels::flex::product_on;
 
 /// Positions per block: two `[32, M]` similarity blocks stay within a core's cache for
@@ -52,11 +56,13 @@ impl<'a> Columns<'a> {
 /// For each position of `render`, the index of its match among the `painting`'s columns: the
 /// largest cosine to the render's feature among the painting features whose cosine to the
 /// `photo`'s feature at that position is within `radius` of the photo's best (all of them when
-/// `photo` is `None`). The first of equal ones wins, as `argmax` picks.
+/// `photo` is `None`). The first of equal ones wins, as `argmax` picks. `bf16`: the cosines
+/// from bf16 operands (see the module), where [`bf16_columns`] can run.
 pub fn guided_nearest(
     render: Columns,
     photo: Option<(Columns, f32)>,
     painting: Columns,
+    bf16: bool,
 ) -> Vec<u32> {
     render.check("render");
     painting.check("painting");
@@ -70,6 +76,12 @@ pub fn guided_nearest(
     if m == 0 {
         return out;
     }
+    // The bf16 operands, packed once for every block.
+    let packed = (bf16 && bf16_columns::available()).then(|| {
+        let left = |cols: &Columns| bf16_columns::Columns::new(cols.values, [c, n]);
+        let right = bf16_columns::Right::new(painting.values, [c, m]);
+        (left(&render), photo.as_ref().map(|(p, _)| left(p)), right)
+    });
     out.par_chunks_mut(BLOCK).enumerate().for_each_init(
         || (vec![0f32; BLOCK * m], vec![0f32; BLOCK * m]),
         |(sim_r, sim_p), (b, idx)| {
@@ -91,9 +103,19 @@ pub fn guided_nearest(
                     )
                 }
             };
-            similarity(&render, sim_r);
-            if let Some((p, _)) = &photo {
-                similarity(p, sim_p);
+            match &packed {
+                Some((render, photo, painting)) => {
+                    painting.block(render, first, rows, sim_r);
+                    if let Some(p) = photo {
+                        painting.block(p, first, rows, sim_p);
+                    }
+                }
+                None => {
+                    similarity(&render, sim_r);
+                    if let Some((p, _)) = &photo {
+                        similarity(p, sim_p);
+                    }
+                }
             }
             for (i, slot) in idx.iter_mut().enumerate() {
                 let r = &sim_r[i * m..(i + 1) * m];
@@ -158,11 +180,11 @@ mod tests {
         let (render, photo, painting) = (unit(n), unit(n), unit(m));
         let (r, p, s) = (host(&render), host(&photo), host(&painting));
         let cols = |values, positions| Columns::new(values, c, positions);
-        let plain = guided_nearest(cols(&r, n), None, cols(&s, m));
+        let plain = guided_nearest(cols(&r, n), None, cols(&s, m), false);
         let want = nearest_columns(render.clone(), painting.clone());
         assert_eq!(plain, indices_of(&host(&want), &s, c, n, m));
         for radius in [0.0, 0.05, 0.3] {
-            let got = guided_nearest(cols(&r, n), Some((cols(&p, n), radius)), cols(&s, m));
+            let got = guided_nearest(cols(&r, n), Some((cols(&p, n), radius)), cols(&s, m), false);
             let bias = candidates(photo.clone(), painting.clone(), radius);
             let want = nearest_columns_among(render.clone(), painting.clone(), bias);
             assert_eq!(
@@ -170,6 +192,49 @@ mod tests {
                 indices_of(&host(&want), &s, c, n, m),
                 "radius {radius}"
             );
+        }
+    }
+
+    /// In bf16 each match is as near as the best one to within the operands' rounding, and
+    /// under a guide it stays in the photo's allowed set to within that rounding too; most
+    /// matches are the f32 ones.
+    #[test]
+    fn bf16_matches_are_the_best_to_within_rounding() {
+        if !bf16_columns::available() {
+            eprintln!("no AVX-512 BF16 here: nothing runs in bf16");
+            return;
+        }
+        let d = Device::flex();
+        d.seed(9);
+        let (c, n, m) = (64, 77, 300);
+        let unit = |cols| unit_columns(Tensor::<2>::random([c, cols], Distribution::Default, &d));
+        let (r, p, s) = (host(&unit(n)), host(&unit(n)), host(&unit(m)));
+        let cols = |values, positions| Columns::new(values, c, positions);
+        let cos = |x: &[f32], i: usize, j: usize| {
+            (0..c).map(|k| x[k * n + i] * s[k * m + j]).sum::<f32>()
+        };
+        for radius in [None, Some(0.05), Some(0.3)] {
+            let guide = radius.map(|radius| (cols(&p, n), radius));
+            let exact = guided_nearest(cols(&r, n), guide, cols(&s, m), false);
+            let got = guided_nearest(cols(&r, n), guide, cols(&s, m), true);
+            let same = exact.iter().zip(&got).filter(|(a, b)| a == b).count();
+            assert!(
+                same * 10 >= n * 9,
+                "{radius:?}: {same} of {n} matches the same"
+            );
+            for i in 0..n {
+                let (want, had) = (exact[i] as usize, got[i] as usize);
+                let gap = cos(&r, i, want) - cos(&r, i, had);
+                assert!(gap <= 0.01, "{radius:?}: position {i} {gap} below the best");
+                if let Some(radius) = radius {
+                    let best = (0..m).map(|j| cos(&p, i, j)).fold(f32::MIN, f32::max);
+                    let margin = cos(&p, i, had) - best + radius;
+                    assert!(
+                        margin >= -0.01,
+                        "{radius}: position {i} outside the guide by {margin}"
+                    );
+                }
+            }
         }
     }
 

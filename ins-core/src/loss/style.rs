@@ -331,6 +331,7 @@ fn nearest_on_host(unit: Tensor<2>, painting: Tensor<2>, photo: Option<&PhotoGui
         p.as_ref()
             .map(|(p, radius)| (Columns::new(p, c, n), *radius)),
         Columns::new(&s, c, m),
+        crate::kernels::dense_bf16::allowed(),
     );
     let index: Vec<i64> = index.into_iter().map(i64::from).collect();
     let index = Tensor::<1, Int>::from_data(TensorData::new(index, [n]), &unit.device());

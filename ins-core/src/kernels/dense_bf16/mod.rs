@@ -53,6 +53,7 @@ const fn rows_for(blocks: usize) -> usize {
     }
 }
 
+pub mod columns;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 
@@ -279,6 +280,13 @@ pub fn scope(on: bool) -> Scope {
 #[must_use = "the setting lasts as long as the guard"]
 pub fn forbid() -> Scope {
     Scope(SETTING.replace(Setting::F32Only))
+}
+
+/// Whether a [`scope`] asking for bf16 would get it on this thread: the CPU can, and no
+/// [`forbid`] holds (`--precision f32`). For products outside a model's scope that follow the
+/// run's precision (NNFM's matches).
+pub fn allowed() -> bool {
+    SETTING.get() != Setting::F32Only && available()
 }
 
 /// Whether this thread's dense products run in bf16 now.
