@@ -1,15 +1,17 @@
 //! A ray march's samples on the device, and what a render builds from them there: the points
-//! the field is evaluated at and the padded `[rays, width]` layout they are composited in.
+//! the field is evaluated at and where each ray's samples lie for compositing.
 //!
-//! Why on the device: the host built the padded layout itself, three `rays × width` arrays
-//! (about 660,000 entries each for a NeRF step of 4,600 rays), and uploaded them with the
-//! points, about 11 MB a step, where the samples themselves are three numbers each and the
-//! layout follows from where each ray's samples start. On the CUDA stand-in that host work
-//! was a third of a grid NeRF step's host time (issue 48, docs/measurements.md).
+//! Why on the device: the host built a padded `[rays, width]` layout itself, three arrays of
+//! about 660,000 entries each for a NeRF step of 4,600 rays, and uploaded them with the points,
+//! about 11 MB a step, where the samples themselves are three numbers each. On the CUDA
+//! stand-in that host work was a third of a grid NeRF step's host time (issue 48,
+//! docs/measurements.md). Since then the renders composite each ray's run of samples without
+//! any padded layout (`volume::composite_ragged`).
 
 use burn::prelude::*;
 
 use super::marched_samples::MarchedSamples;
+use super::volume::RaySpans;
 use crate::shape_buckets::pad_rows;
 
 /// The samples of a [`MarchedSamples`], uploaded once: each sample's ray, distance and length,
@@ -24,18 +26,6 @@ pub struct DeviceSamples {
     pub delta: Tensor<1>,
     /// First sample of each ray and one past the last, `[rays + 1]`.
     offsets: Tensor<1, Int>,
-}
-
-/// The `[rays, width]` layout a render composites in: a ray's samples in its row, in order.
-pub struct PaddedLayout {
-    /// Index of each cell's sample, `rows` (one past the samples) where the row has ended,
-    /// `[rays · width]`.
-    pub index: Tensor<1, Int>,
-    /// Distance of each cell; where the row has ended, its last sample's (the ray's `near`
-    /// if it has none), so the depth of empty columns stays meaningful. `[rays, width]`.
-    pub t: Tensor<2>,
-    /// Length of each cell's sample, 0 where the row has ended. `[rays, width]`.
-    pub delta: Tensor<2>,
 }
 
 impl DeviceSamples {
@@ -63,6 +53,15 @@ impl DeviceSamples {
         }
     }
 
+    /// Where each ray's samples are, for [`composite_ragged`](super::volume::composite_ragged).
+    pub fn spans(&self) -> RaySpans {
+        RaySpans {
+            t: self.t.clone(),
+            delta: self.delta.clone(),
+            offsets: self.offsets.clone().float(),
+        }
+    }
+
     /// Rows, padding included.
     pub fn rows(&self) -> usize {
         self.ray.dims()[0]
@@ -79,85 +78,14 @@ impl DeviceSamples {
     pub fn per_sample<const D: usize>(&self, per_ray: Tensor<D>) -> Tensor<D> {
         per_ray.select(0, self.ray.clone())
     }
-
-    /// The padded layout `width` columns wide (at least the most samples of a ray), the rays'
-    /// `near` distances `[R]` standing in for the depth of rays with no sample.
-    pub fn padded(&self, near: &[f32], width: usize) -> PaddedLayout {
-        let device = self.t.device();
-        let rays = near.len();
-        debug_assert_eq!(self.offsets.dims()[0], rays + 1);
-        let start = self.offsets.clone().slice(0..rays).unsqueeze_dim::<2>(1);
-        let end = self
-            .offsets
-            .clone()
-            .slice(1..rays + 1)
-            .unsqueeze_dim::<2>(1);
-        let column = Tensor::<1, Int>::arange(0..width as i64, &device).unsqueeze_dim::<2>(0);
-        // The sample each cell would hold, and whether its row still has one.
-        let k = (start.clone() + column).expand([rays, width]);
-        let end = end.expand([rays, width]);
-        let inside = k.clone().lower(end.clone());
-        let index = k
-            .clone()
-            .mask_fill(inside.clone().bool_not(), self.rows() as i64)
-            .reshape([rays * width]);
-        // Past a row's end, its last sample; rows with none read sample 0, then take `near`.
-        let last = k
-            .min_pair(end.clone() - 1)
-            .clamp_min(0)
-            .reshape([rays * width]);
-        let empty = end.equal(start.expand([rays, width]));
-        let near = Tensor::<1>::from_floats(near, &device)
-            .unsqueeze_dim::<2>(1)
-            .expand([rays, width]);
-        let t = self
-            .t
-            .clone()
-            .select(0, last.clone())
-            .reshape([rays, width])
-            .mask_where(empty, near);
-        let delta = self
-            .delta
-            .clone()
-            .select(0, last)
-            .reshape([rays, width])
-            .mask_fill(inside.bool_not(), 0.0);
-        PaddedLayout { index, t, delta }
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The layout as the host built it before: what [`DeviceSamples::padded`] must equal.
-    fn host_layout(
-        m: &MarchedSamples,
-        rows: usize,
-        near: &[f32],
-        width: usize,
-    ) -> (Vec<i64>, Vec<f32>, Vec<f32>) {
-        let r = near.len();
-        let mut index = vec![rows as i64; r * width];
-        let mut t_pad = vec![0f32; r * width];
-        let mut delta_pad = vec![0f32; r * width];
-        for ray in 0..r {
-            let (a, b) = (m.offsets[ray] as usize, m.offsets[ray + 1] as usize);
-            for (j, k) in (a..b).enumerate() {
-                index[ray * width + j] = k as i64;
-                t_pad[ray * width + j] = m.t[k];
-                delta_pad[ray * width + j] = m.delta[k];
-            }
-            let last = if b > a { m.t[b - 1] } else { near[ray] };
-            for j in (b - a)..width {
-                t_pad[ray * width + j] = last;
-            }
-        }
-        (index, t_pad, delta_pad)
-    }
-
     #[test]
-    fn the_padded_layout_is_the_one_the_host_built() {
+    fn the_spans_points_and_per_ray_rows_are_the_samples() {
         let device = Device::flex();
         // Five rays: the first and the fourth without samples, the third the widest.
         let counts = [0usize, 2, 5, 0, 1];
@@ -173,22 +101,17 @@ mod tests {
             }
             m.offsets.push(m.t.len() as u32);
         }
-        let near = [0.25, 0.5, 0.75, 1.25, 1.5];
-        let (rows, width) = (11, 7);
+        let rows = 11;
         let s = DeviceSamples::upload(&m, rows, &device);
         assert_eq!(s.rows(), rows);
-        let got = s.padded(&near, width);
-        let (index, t, delta) = host_layout(&m, rows, &near, width);
-        assert_eq!(
-            got.index
-                .into_data()
-                .convert::<i64>()
-                .try_to_vec::<i64>()
-                .unwrap(),
-            index
-        );
-        assert_eq!(got.t.into_data().try_to_vec::<f32>().unwrap(), t);
-        assert_eq!(got.delta.into_data().try_to_vec::<f32>().unwrap(), delta);
+        let spans = s.spans();
+        let host = |t: Tensor<1>| t.into_data().try_to_vec::<f32>().unwrap();
+        let offsets: Vec<f32> = m.offsets.iter().map(|&o| o as f32).collect();
+        assert_eq!(host(spans.offsets), offsets);
+        // The padding repeats the first sample; no ray's span reaches it.
+        let padded = |v: &[f32]| [v, &vec![v[0]; rows - v.len()]].concat();
+        assert_eq!(host(spans.t), padded(&m.t));
+        assert_eq!(host(spans.delta), padded(&m.delta));
         // Each sample's point and a per-ray value, padding repeating the first sample.
         let o = Tensor::<2>::from_floats([[0.0, 0.0, 0.0]; 5], &device)
             + Tensor::<1>::from_floats([0.0, 1.0, 2.0, 3.0, 4.0], &device).unsqueeze_dim(1);

@@ -9,6 +9,7 @@
 use burn::prelude::*;
 
 use crate::kernels::composite::op::{composite_op, weights_op};
+use crate::kernels::composite::ragged::ragged_composite_op;
 use crate::kernels::cube_f32;
 
 /// What compositing gives per ray.
@@ -29,7 +30,12 @@ pub struct Composite {
 #[derive(Debug, Clone)]
 enum Weights {
     Computed(Tensor<2>),
-    Later { sigma: Tensor<2>, delta: Tensor<2> },
+    Later {
+        sigma: Tensor<2>,
+        delta: Tensor<2>,
+    },
+    /// Of [`composite_ragged`]: the densities `[S, N]` along their spans, and the stop.
+    Ragged(Box<(Tensor<2>, RaySpans, f32)>),
 }
 
 impl Composite {
@@ -38,6 +44,10 @@ impl Composite {
         match &self.weights {
             Weights::Computed(w) => w.clone(),
             Weights::Later { sigma, delta } => weights_op(sigma.clone(), delta.clone()),
+            Weights::Ragged(ragged) => {
+                let (sigma, spans, stop_below) = ragged.as_ref();
+                padded_weights(sigma, spans, *stop_below)
+            }
         }
     }
 }
@@ -51,15 +61,98 @@ pub fn weights(sigma: Tensor<2>, delta: Tensor<2>) -> Tensor<2> {
     transmittance * alpha
 }
 
-/// 1 for the samples whose transmittance in front of them is at least `min_transmittance`, 0
-/// for those behind, `[R, S]`, under densities `sigma [R, S]` and spacings `delta [R, S]`: the
-/// samples [`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)
-/// keeps, found on the device. Multiplying the densities by it gives the render of the kept
-/// samples alone, without reading the densities back. No gradient flows through it.
-pub fn in_front_of_opaque(sigma: Tensor<2>, delta: Tensor<2>, min_transmittance: f32) -> Tensor<2> {
-    let tau = sigma.detach().clamp_min(0.0) * delta.detach();
-    let in_front = tau.clone().cumsum(1) - tau;
-    in_front.lower_equal_elem(-min_transmittance.ln()).float()
+/// Where each ray's samples are, on the device: ray `r`'s are rows `offsets[r]..offsets[r + 1]`
+/// (front to back), sample `k` at distance `t[k]` standing for `delta[k]` of the ray. Rows past
+/// the last offset (a bucket's padding) belong to no ray.
+#[derive(Debug, Clone)]
+pub struct RaySpans {
+    /// Distances `[N]`.
+    pub t: Tensor<1>,
+    /// Lengths `[N]`.
+    pub delta: Tensor<1>,
+    /// First row of each ray and one past the last, `[R + 1]`, as f32 (exact below 2²⁴).
+    pub offsets: Tensor<1>,
+}
+
+impl RaySpans {
+    /// From the host's `offsets [R + 1]`, `t [N]` and `delta [N]`.
+    pub fn upload(offsets: &[u32], t: &[f32], delta: &[f32], device: &Device) -> Self {
+        let offsets: Vec<f32> = offsets.iter().map(|&o| o as f32).collect();
+        Self {
+            t: Tensor::from_floats(t, device),
+            delta: Tensor::from_floats(delta, device),
+            offsets: Tensor::from_floats(offsets.as_slice(), device),
+        }
+    }
+
+    /// Number of rays.
+    pub fn rays(&self) -> usize {
+        self.offsets.dims()[0] - 1
+    }
+}
+
+/// [`composite_ragged`]'s weights in the padded layout `[S·R, widest ray]` (zeros past each
+/// ray's samples and behind its stop), computed on the host: they choose where a coarse-to-fine
+/// render samples next, which composites padded rows and never asks a ragged composite.
+fn padded_weights(sigma: &Tensor<2>, spans: &RaySpans, stop_below: f32) -> Tensor<2> {
+    let ([styles, n], device) = (sigma.dims(), sigma.device());
+    let host = |t: &Tensor<1>| t.clone().into_data().convert::<f32>().try_to_vec::<f32>();
+    let sigma = host(&sigma.clone().reshape([styles * n])).expect("f32 densities");
+    let delta = host(&spans.delta).expect("f32 lengths");
+    let offsets: Vec<usize> = host(&spans.offsets)
+        .expect("f32 offsets")
+        .iter()
+        .map(|&o| o as usize)
+        .collect();
+    let rays = spans.rays();
+    let width = offsets
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .max()
+        .unwrap_or(0)
+        .max(1);
+    let mut out = vec![0.0f32; styles * rays * width];
+    for (row, dst) in out.chunks_exact_mut(width).enumerate() {
+        let (style, r) = (row / rays, row % rays);
+        let mut clear = 1.0f32;
+        for (k, w) in (offsets[r]..offsets[r + 1]).zip(dst) {
+            if clear < stop_below {
+                break;
+            }
+            let through = (-(sigma[style * n + k] * delta[k])).exp();
+            *w = clear * (1.0 - through);
+            clear *= through;
+        }
+    }
+    Tensor::<1>::from_floats(out.as_slice(), &device).reshape([styles * rays, width])
+}
+
+/// Composites marched samples without a padded layout: `sigma [S, N]` and `rgb [S, N, 3]` under
+/// `S` styles, ray `r`'s samples the rows `spans` gives it; `S·R` rays out (style-major), as
+/// [`composite`] gives them for the same samples padded. Each ray stops where the transmittance
+/// in front of a sample falls below `stop_below` (0: never): the samples behind get no weight
+/// and no gradient, as if the host had kept only those in front
+/// ([`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)). On Flex and the CubeCL
+/// backends ([`crate::kernels::composite::ragged`]); its weights come padded,
+/// `[S·R, widest ray]`, computed on the host.
+pub fn composite_ragged(
+    sigma: Tensor<2>,
+    rgb: Tensor<3>,
+    spans: RaySpans,
+    background: [f32; 3],
+    stop_below: f32,
+) -> Composite {
+    let rows = sigma.dims()[0] * spans.rays();
+    let [r, g, b] = background;
+    let settings = Tensor::<1>::from_floats([r, g, b, stop_below], &sigma.device());
+    let layout = [spans.t.clone(), spans.delta.clone(), spans.offsets.clone()];
+    let out = ragged_composite_op(sigma.clone(), rgb, layout, settings);
+    Composite {
+        rgb: out.clone().slice([0..rows, 0..3]),
+        depth: out.clone().slice([0..rows, 3..4]).reshape([rows]),
+        opacity: out.slice([0..rows, 4..5]).reshape([rows]),
+        weights: Weights::Ragged(Box::new((sigma.detach(), spans, stop_below))),
+    }
 }
 
 /// Composites samples: `sigma [R, S]`, `rgb [R, S, 3]`, `t [R, S]`, `delta [R, S]`; the part of
@@ -187,57 +280,168 @@ mod tests {
         }
     }
 
-    /// The mask keeps exactly the samples the host's `until_opaque` keeps.
+    /// A ragged composite stopped where rays turn opaque is the composite of the samples the
+    /// host's `until_opaque` keeps: the same pixels, and gradients only at those samples.
     #[test]
-    fn the_samples_in_front_of_opaque_are_those_the_host_keeps() {
+    fn a_stopped_ray_composites_the_samples_the_host_keeps() {
         use crate::render::marched_samples::MarchedSamples;
-        let d = Device::flex();
-        let (r, w) = (6, 12);
+        let d = Device::flex().autodiff();
         let mut m = MarchedSamples::default();
-        let (mut sigma, mut delta) = (vec![0f32; r * w], vec![0f32; r * w]);
-        let mut density = Vec::new();
+        let (mut density, mut colour) = (Vec::new(), Vec::new());
         m.offsets.push(0);
-        for ray in 0..r {
-            let len = 4 + ray; // the rest of the row is padding (δ = 0)
-            for j in 0..len {
-                let s = ((j * 7 + ray * 3) % 5) as f32 * ray as f32;
-                let dt = 0.1 + 0.05 * (j % 3) as f32;
-                sigma[ray * w + j] = s;
-                delta[ray * w + j] = dt;
-                density.push(s);
+        for ray in 0..6 {
+            for j in 0..4 + ray {
+                density.push(((j * 7 + ray * 3) % 5) as f32 * ray as f32 * 3.0);
+                colour.extend([0.1 * j as f32, 0.5, 1.0 - 0.05 * ray as f32]);
                 m.ray.push(ray as u32);
                 m.t.push(j as f32);
-                m.delta.push(dt);
+                m.delta.push(0.1 + 0.05 * (j % 3) as f32);
             }
             m.offsets.push(m.t.len() as u32);
         }
         let min_t = 1.0 / 512.0;
-        let (_, kept) = m.until_opaque(&density, min_t);
-        let mask = in_front_of_opaque(
-            row(&sigma, &d).reshape([r, w]),
-            row(&delta, &d).reshape([r, w]),
-            min_t,
-        )
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap();
-        let mut want = vec![0f32; r * w];
-        for k in kept {
-            let k = k as usize;
-            let ray = m.ray[k] as usize;
-            want[ray * w + (k - m.offsets[ray] as usize)] = 1.0;
-        }
-        for ray in 0..r {
-            let len = 4 + ray;
-            assert_eq!(
-                &mask[ray * w..ray * w + len],
-                &want[ray * w..ray * w + len],
-                "ray {ray}"
-            );
-        }
+        let (kept_m, kept) = m.until_opaque(&density, min_t);
         assert!(
-            want.iter().sum::<f32>() < (r * 4 + 15) as f32,
-            "some samples lie behind"
+            kept.len() + 10 < m.len(),
+            "{} of {} samples kept",
+            kept.len(),
+            m.len()
         );
+        let n = m.len();
+        let sigma = Tensor::<1>::from_floats(density.as_slice(), &d).reshape([1, n]);
+        let rgb = Tensor::<1>::from_floats(colour.as_slice(), &d).reshape([1, n, 3]);
+        let (sigma, rgb) = (sigma.require_grad(), rgb.require_grad());
+        let bg = [1.0, 1.0, 1.0];
+        let spans = RaySpans::upload(&m.offsets, &m.t, &m.delta, &d);
+        let stopped = composite_ragged(sigma.clone(), rgb.clone(), spans, bg, min_t);
+        let rows = Tensor::<1, Int>::from_data(
+            TensorData::new(
+                kept.iter().map(|&k| k as i64).collect::<Vec<_>>(),
+                [kept.len()],
+            ),
+            &d,
+        );
+        let spans = RaySpans::upload(&kept_m.offsets, &kept_m.t, &kept_m.delta, &d);
+        let front = composite_ragged(
+            sigma.clone().select(1, rows.clone()),
+            rgb.clone().select(1, rows),
+            spans,
+            bg,
+            0.0,
+        );
+        let worst = |a: Tensor<2>, b: Tensor<2>| (a - b).abs().max().into_scalar::<f32>();
+        assert!(
+            worst(stopped.rgb.clone(), front.rgb.clone()) < 1e-6,
+            "colours"
+        );
+        let (a, b) = (stopped.opacity.clone(), front.opacity.clone());
+        assert!(
+            worst(a.clone().reshape([6, 1]), b.reshape([6, 1])) < 1e-6,
+            "opacities"
+        );
+        // The weights (padded, as wide as the widest ray) stop there too: they sum to it.
+        let summed = stopped.weights().sum_dim(1);
+        assert!(worst(summed, a.clone().reshape([6, 1])) < 1e-6, "weights");
+        let probe = Tensor::<2>::from_floats([[1.0, -2.0, 0.5]; 6], &d);
+        let g = (stopped.rgb * probe.clone()).sum().backward();
+        let g_front = (front.rgb * probe).sum().backward();
+        let host = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+        // The kept samples' composite picked them out of the same densities: its gradient is
+        // over all of them, zero behind.
+        let (got, want) = (
+            host(sigma.grad(&g).unwrap()),
+            host(sigma.grad(&g_front).unwrap()),
+        );
+        for (k, (a, b)) in got.iter().zip(&want).enumerate() {
+            assert!(
+                (a - b).abs() < 1e-6,
+                "density gradient of sample {k}: {a} vs {b}"
+            );
+            if !kept.contains(&(k as u32)) {
+                assert_eq!(*a, 0.0, "sample {k} lies behind");
+            }
+        }
+    }
+
+    /// The ragged composite against the padded one (ordinary ops) on the same samples: colours,
+    /// depths, opacities, the weights, and the gradients of densities and colours, under two
+    /// styles, with a ray of no samples, one of one and a dense one.
+    #[test]
+    fn the_ragged_composite_is_the_padded_one() {
+        use burn::tensor::Distribution;
+        let d = Device::flex().autodiff();
+        d.seed(3);
+        let counts = [3usize, 0, 1, 40, 7];
+        let (styles, rays, width) = (2, counts.len(), 40);
+        let n: usize = counts.iter().sum();
+        let mut offsets = vec![0u32];
+        let (mut t, mut delta, mut index) = (vec![], vec![], vec![]);
+        for (r, &c) in counts.iter().enumerate() {
+            for j in 0..c {
+                t.push(2.0 + 0.05 * j as f32);
+                delta.push(0.03 + 0.01 * (j % 3) as f32);
+                index.push((offsets[r] as usize + j) as i64);
+            }
+            // The padded row: this ray's samples, then padding (n: a zero appended below).
+            index.extend(std::iter::repeat_n(n as i64, width - c));
+            offsets.push(offsets[r] + c as u32);
+        }
+        let sigma = Tensor::<2>::random([styles, n], Distribution::Uniform(0.0, 30.0), &d);
+        let rgb = Tensor::<3>::random([styles, n, 3], Distribution::Default, &d);
+        let (sigma, rgb) = (sigma.require_grad(), rgb.require_grad());
+        let probe = Tensor::<2>::random([styles * rays, 5], Distribution::Default, &d);
+        let bg = [1.0, 0.5, 0.0];
+        let loss = |c: &Composite| {
+            let out = Tensor::cat(
+                vec![
+                    c.rgb.clone(),
+                    c.depth.clone().reshape([styles * rays, 1]),
+                    c.opacity.clone().reshape([styles * rays, 1]),
+                ],
+                1,
+            );
+            (out.clone() * probe.clone()).sum()
+        };
+        let spans = RaySpans::upload(&offsets, &t, &delta, &d);
+        let ragged = composite_ragged(sigma.clone(), rgb.clone(), spans, bg, 0.0);
+        // The same samples padded: zero density and spacing past each ray's own.
+        let index = Tensor::<1, Int>::from_data(TensorData::new(index, [rays * width]), &d);
+        let pad = |x: Tensor<2>| Tensor::cat(vec![x, Tensor::zeros([styles, 1], &d)], 1);
+        let sigma_p = pad(sigma.clone())
+            .select(1, index.clone())
+            .reshape([styles * rays, width]);
+        let rgb_p = Tensor::cat(vec![rgb.clone(), Tensor::zeros([styles, 1, 3], &d)], 1)
+            .select(1, index.clone())
+            .reshape([styles * rays, width, 3]);
+        let host_row = |v: &[f32]| {
+            pad(Tensor::<1>::from_floats(v, &d)
+                .reshape([1, n])
+                .repeat_dim(0, styles))
+        };
+        let t_p = host_row(&t)
+            .select(1, index.clone())
+            .reshape([styles * rays, width]);
+        let delta_p = host_row(&delta)
+            .select(1, index)
+            .reshape([styles * rays, width]);
+        let padded = composite(sigma_p, rgb_p, t_p, delta_p, bg);
+        let worst = |a: Tensor<2>, b: Tensor<2>| (a - b).abs().max().into_scalar::<f32>();
+        let col = |x: Tensor<1>| x.reshape([styles * rays, 1]);
+        assert!(
+            worst(ragged.rgb.clone(), padded.rgb.clone()) < 1e-5,
+            "colours"
+        );
+        assert!(
+            worst(col(ragged.depth.clone()), col(padded.depth.clone())) < 1e-5,
+            "depths"
+        );
+        assert!(worst(col(ragged.opacity.clone()), col(padded.opacity.clone())) < 1e-5);
+        assert!(worst(ragged.weights(), padded.weights()) < 1e-5, "weights");
+        let (g, g_p) = (loss(&ragged).backward(), loss(&padded).backward());
+        let gs = worst(sigma.grad(&g).unwrap(), sigma.grad(&g_p).unwrap());
+        assert!(gs < 1e-5, "density gradients differ by {gs}");
+        let flat = |x: Tensor<3>| x.reshape([styles * n, 3]);
+        let gc = worst(flat(rgb.grad(&g).unwrap()), flat(rgb.grad(&g_p).unwrap()));
+        assert!(gc < 1e-5, "colour gradients differ by {gc}");
     }
 }

@@ -7,7 +7,7 @@ use ins_core::render::gather::select_parallel;
 use ins_core::render::marched_layout::DeviceSamples;
 use ins_core::render::occupancy::OccupancyGrid;
 use ins_core::render::samplers::{deltas, hierarchical, stratified};
-use ins_core::render::volume::{Composite, composite, in_front_of_opaque};
+use ins_core::render::volume::{Composite, composite, composite_ragged};
 use ins_core::shape_buckets::padded_size;
 use ins_scene::data::Scene;
 use ins_scene::geometry::Vec3;
@@ -187,7 +187,6 @@ fn render_marched(
     seed: Option<u64>,
     device: &Device,
 ) -> Rendered {
-    let r = rays.len();
     let mut m = grid.march(&rays.rays, max_per_ray, seed);
     // With `until_opaque` on the CPU, the geometry of the samples evaluated and the kept ones'
     // rows. Off the CPU, choosing the samples would read the densities back in the middle of
@@ -210,10 +209,9 @@ fn render_marched(
         m.offsets.iter_mut().skip(1).for_each(|o| *o = 1);
     }
     let n = m.len();
-    // On GPUs the sample count and the widest ray are rounded up to a bucket, so the kernels
-    // of one step serve the next; the extra samples repeat the first and no ray reads them.
+    // On GPUs the sample count is rounded up to a bucket, so the kernels of one step serve the
+    // next; the extra samples repeat the first and no ray reads them.
     let n_eval = padded_size(n, device);
-    let width = padded_size(m.max_per_ray().max(1), device);
     let samples = DeviceSamples::upload(&m, n_eval, device);
     let (points, dirs) = sample_inputs(model, rays, grid, &samples, device);
     let ev = match geometry {
@@ -227,32 +225,12 @@ fn render_marched(
         }
         None => model.evaluate(points.clone(), dirs, codes),
     };
-    let s = ev.density.dims()[0];
-    // Padded [R, width] layout: index into the evaluated samples, `n_eval` (a zero) for padding.
-    let layout = samples.padded(&rays.rays.near, width);
-    let index = layout.index;
-    let density = select_parallel(
-        Tensor::cat(vec![ev.density, Tensor::zeros([s, 1], device)], 1),
-        1,
-        index.clone(),
-    )
-    .reshape([s * r, width]);
-    let t = repeat_rows(layout.t, s);
-    let delta = repeat_rows(layout.delta, s);
-    let density = match until_opaque.filter(|_| !on_cpu) {
-        Some(min_transmittance) => {
-            density.clone() * in_front_of_opaque(density, delta.clone(), min_transmittance)
-        }
-        None => density,
-    };
-    let rgb = select_parallel(
-        Tensor::cat(vec![ev.rgb, Tensor::zeros([s, 1, 3], device)], 1),
-        1,
-        index,
-    )
-    .reshape([s * r, width, 3]);
+    // Each ray's run of samples composited as it is: a padded `[R, width]` layout is as wide as
+    // the ray with the most samples, ten times the samples on lego. Off the CPU, each ray stops
+    // where it turns opaque (`until_opaque`, see above).
+    let stop_below = until_opaque.filter(|_| !on_cpu).unwrap_or(0.0);
     Rendered {
-        fine: composite(density, rgb, t, delta, background),
+        fine: composite_ragged(ev.density, ev.rgb, samples.spans(), background, stop_below),
         coarse_rgb: None,
         points,
         raw: ev.raw,

@@ -312,6 +312,107 @@ fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
     );
 }
 
+/// Compositing each ray's run of samples (no padded layout) in one kernel forward and one
+/// backward on wgpu gives flex's loops: two styles, rays of no, one and many samples, rays that
+/// turn opaque and stop there (the stop a GPU uses for `until_opaque`), and rows past the last
+/// ray (a bucket's padding) that take no gradient.
+#[test]
+fn ragged_compositing_matches_flex_on_wgpu() {
+    use ins_core::render::volume::{RaySpans, composite_ragged};
+    let counts: Vec<u32> = (0..29)
+        .map(|r| [0, 1, 45, 7, 20][r % 5] + (r as u32 % 3))
+        .collect();
+    let mut offsets = vec![0u32];
+    for c in &counts {
+        offsets.push(offsets.last().unwrap() + c);
+    }
+    let (styles, rays, n) = (2usize, counts.len(), *offsets.last().unwrap() as usize);
+    let rows = n + 13; // a bucket's padding after the last ray's samples
+    let (mut sigma, mut rgb) = (Vec::new(), Vec::new());
+    for s in 0..styles {
+        for k in 0..rows {
+            let x = (k * 17 + s * 5) % 23;
+            sigma.push(if k % 3 == 0 {
+                30.0 * x as f32
+            } else {
+                0.3 * x as f32
+            });
+            rgb.extend([x as f32 / 23.0, (k % 5) as f32 / 5.0, 0.2 + 0.1 * s as f32]);
+        }
+    }
+    let t: Vec<f32> = (0..rows).map(|k| 2.0 + 0.01 * k as f32).collect();
+    let delta: Vec<f32> = (0..rows).map(|k| 0.02 + 0.01 * (k % 4) as f32).collect();
+    let probe: Vec<f32> = (0..styles * rays * 5)
+        .map(|i| ((i * 7) % 11) as f32 / 5.0 - 1.0)
+        .collect();
+    let on = move |device: &Device| -> Vec<Vec<f32>> {
+        let device = device.clone().autodiff();
+        let mut out = Vec::new();
+        for stop_below in [0.0, 0.01] {
+            let sigma = Tensor::<1>::from_floats(sigma.as_slice(), &device).reshape([styles, rows]);
+            let rgb = Tensor::<1>::from_floats(rgb.as_slice(), &device).reshape([styles, rows, 3]);
+            let (sigma, rgb) = (sigma.require_grad(), rgb.require_grad());
+            let spans = RaySpans::upload(&offsets, &t, &delta, &device);
+            let c = composite_ragged(
+                sigma.clone(),
+                rgb.clone(),
+                spans,
+                [1.0, 1.0, 1.0],
+                stop_below,
+            );
+            let outputs = Tensor::cat(
+                vec![
+                    c.rgb.clone(),
+                    c.depth.clone().reshape([styles * rays, 1]),
+                    c.opacity.clone().reshape([styles * rays, 1]),
+                ],
+                1,
+            );
+            let probe =
+                Tensor::<1>::from_floats(probe.as_slice(), &device).reshape([styles * rays, 5]);
+            let grads = (outputs.clone() * probe).sum().backward();
+            out.extend([
+                values(outputs),
+                values(c.weights()),
+                values(sigma.grad(&grads).unwrap()),
+                values(rgb.grad(&grads).unwrap().reshape([styles, rows * 3])),
+            ]);
+        }
+        out
+    };
+    let flex = on(&Device::flex());
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "ragged compositing", move || {
+        on(&BackendChoice::Wgpu.device())
+    });
+    let what = ["outputs", "weights", "density gradient", "colour gradient"];
+    for (i, (w, f)) in wgpu.iter().zip(&flex).enumerate() {
+        let err = max_rel_diff(w, f, 1e-6);
+        let stop = if i < 4 { "no stop" } else { "stopped" };
+        eprintln!(
+            "ragged compositing, {} ({stop}): {err:e} relative to the largest",
+            what[i % 4]
+        );
+        assert!(
+            err < 1e-4,
+            "{} ({stop}): {err:e} relative to the largest",
+            what[i % 4]
+        );
+    }
+    // The stop leaves samples without gradient that the full walk moves; the padding rows
+    // take none in either.
+    let moved = |g: &[f32]| g.iter().filter(|&&x| x != 0.0).count();
+    assert!(
+        moved(&wgpu[6]) + 20 < moved(&wgpu[2]),
+        "the stop changed nothing"
+    );
+    for g in [&wgpu[2], &wgpu[6]] {
+        assert!(
+            g[n..rows].iter().chain(&g[rows + n..]).all(|&x| x == 0.0),
+            "padding moved"
+        );
+    }
+}
+
 /// NeuS's section weights as one kernel forward and one backward (the GPU path) give flex's
 /// ordinary ops' weights and the gradients of the SDF and the sharpness: rays that cross the
 /// surface sharply (their first section opaque), rays that leave it again (a rising SDF, where

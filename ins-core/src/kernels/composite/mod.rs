@@ -5,6 +5,10 @@
 //!
 //! - [`cube`]: the forward and backward as CubeCL kernels, one unit a ray.
 //! - [`op`]: a Burn op with that backward, under autodiff and Fusion.
+//! - [`ragged`], [`ragged_cube`]: compositing straight from each ray's run of marched samples
+//!   (no padded layout), on Flex and as CubeCL kernels.
 
 pub mod cube;
 pub mod op;
+pub mod ragged;
+pub mod ragged_cube;
