@@ -192,8 +192,9 @@ pub fn render_looks(
 /// every sample evaluated, and the kept samples' rows in them. What a stylization step that
 /// keeps the density shades on the CPU. The samples are evaluated in rounds of growing
 /// length, so that most of those behind a surface are not (half of a capture's marched
-/// samples). Each round reads the densities back: off the CPU the step masks them on the
-/// device instead (`render.rs`, [`in_front_of_opaque`](ins_core::render::volume::in_front_of_opaque)).
+/// samples). Each round reads the densities back: off the CPU each ray's composite stops on
+/// the device instead (`render.rs`, [`composite_ragged`](ins_core::render::volume::composite_ragged)'s
+/// `stop_below`).
 pub(crate) fn geometry_until_opaque(
     model: &NerfModel,
     rays: &RenderRays,
