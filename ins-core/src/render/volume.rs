@@ -132,12 +132,9 @@ fn padded_weights(sigma: &Tensor<2>, spans: &RaySpans, stop_below: f32) -> Tenso
 /// [`composite`] gives them for the same samples padded. Each ray stops where the transmittance
 /// in front of a sample falls below `stop_below` (0: never): the samples behind get no weight
 /// and no gradient, as if the host had kept only those in front
-/// ([`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)).
-/// On Flex and the CubeCL backends ([`crate::kernels::composite::ragged`]); its weights come
-/// padded, `[S·R, widest ray]`, computed on the host.
-///
-/// # Panics
-/// From 2²⁴ samples a call (the offsets travel as f32): renders go in chunks far below that.
+/// ([`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)). On Flex and the CubeCL
+/// backends ([`crate::kernels::composite::ragged`]); its weights come padded,
+/// `[S·R, widest ray]`, computed on the host.
 pub fn composite_ragged(
     sigma: Tensor<2>,
     rgb: Tensor<3>,
@@ -145,9 +142,7 @@ pub fn composite_ragged(
     background: [f32; 3],
     stop_below: f32,
 ) -> Composite {
-    let [styles, n] = sigma.dims();
-    assert!(n < 1 << 24, "{n} samples in one composite: at most 2^24");
-    let rows = styles * spans.rays();
+    let rows = sigma.dims()[0] * spans.rays();
     let [r, g, b] = background;
     let settings = Tensor::<1>::from_floats([r, g, b, stop_below], &sigma.device());
     let layout = [spans.t.clone(), spans.delta.clone(), spans.offsets.clone()];
