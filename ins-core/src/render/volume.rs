@@ -132,9 +132,10 @@ fn padded_weights(sigma: &Tensor<2>, spans: &RaySpans, stop_below: f32) -> Tenso
 /// [`composite`] gives them for the same samples padded. Each ray stops where the transmittance
 /// in front of a sample falls below `stop_below` (0: never): the samples behind get no weight
 /// and no gradient, as if the host had kept only those in front
-/// ([`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)). On Flex and the CubeCL
-/// backends ([`crate::kernels::composite::ragged`]); its weights come padded,
-/// `[S·R, widest ray]`, computed on the host.
+/// ([`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)).
+/// On Flex and the CubeCL backends ([`crate::kernels::composite::ragged`]); its weights come
+/// padded, `[S·R, widest ray]`, computed on the host. The offsets travel as f32, exact up to
+/// 2²⁴ samples a call: renders go in chunks far below that.
 pub fn composite_ragged(
     sigma: Tensor<2>,
     rgb: Tensor<3>,
