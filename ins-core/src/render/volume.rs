@@ -1,16 +1,16 @@
 //! Volume compositing (NeRF's quadrature): per-sample densities and colours along rays become a
 //! pixel colour, an expected depth and an opacity.
 //!
-//! Samples come as a padded `[R, S]` layout: ray `r`'s samples fill the first columns of row
-//! `r`, in increasing `t`, and padding columns have `δ = 0`, so they contribute nothing.
 //! Weights use the exclusive transmittance `T_i = exp(−Σ_{j<i} σ_j δ_j)` and
-//! `α_i = 1 − exp(−σ_i δ_i)`; everything is differentiable (cumsum included).
+//! `α_i = 1 − exp(−σ_i δ_i)`. Samples come as each ray's run of rows ([`composite_ragged`], a
+//! grid NeRF's marched samples) or padded `[R, S]` ([`composite`], every ray as many; padding
+//! has `δ = 0` and contributes nothing); both go through one op
+//! ([`crate::kernels::composite`]).
 
 use burn::prelude::*;
+use burn::tensor::DType;
 
-use crate::kernels::composite::op::{composite_op, weights_op};
-use crate::kernels::composite::ragged::ragged_composite_op;
-use crate::kernels::cube_f32;
+use crate::kernels::composite::ragged::{ragged_composite_op, ragged_weights_op};
 
 /// What compositing gives per ray.
 #[derive(Debug, Clone)]
@@ -25,28 +25,39 @@ pub struct Composite {
 }
 
 /// A composite's per-sample weights, detached: computed on the way (ordinary ops), or left to
-/// compute from the densities and spacings if asked for (the compositing kernel does not write
-/// them; a kernel of their own does, in one launch).
+/// the op's own walk if asked for (the compositing kernel does not write them).
 #[derive(Debug, Clone)]
 enum Weights {
     Computed(Tensor<2>),
-    Later {
-        sigma: Tensor<2>,
-        delta: Tensor<2>,
-    },
-    /// Of [`composite_ragged`]: the densities `[S, N]` along their spans, and the stop.
-    Ragged(Box<(Tensor<2>, RaySpans, f32)>),
+    /// The op's inputs: the densities `[S, N]`, the lengths and offsets, the settings, and
+    /// the layout the samples came in.
+    Later(Box<WalkInputs>),
+}
+
+#[derive(Debug, Clone)]
+struct WalkInputs {
+    sigma: Tensor<2>,
+    delta: Tensor<1>,
+    offsets: Tensor<1>,
+    settings: Tensor<1>,
+    shape: [usize; 2],
 }
 
 impl Composite {
-    /// Per-sample weights `[R, S]`, without gradient: they choose where to sample next.
+    /// Per-sample weights without gradient (they choose where to sample next), in the samples'
+    /// own layout: `[R, S]` from [`composite`], `[S, N]` from [`composite_ragged`].
     pub fn weights(&self) -> Tensor<2> {
         match &self.weights {
             Weights::Computed(w) => w.clone(),
-            Weights::Later { sigma, delta } => weights_op(sigma.clone(), delta.clone()),
-            Weights::Ragged(ragged) => {
-                let (sigma, spans, stop_below) = ragged.as_ref();
-                padded_weights(sigma, spans, *stop_below)
+            Weights::Later(walk) => {
+                let WalkInputs {
+                    sigma,
+                    delta,
+                    offsets,
+                    settings,
+                    shape,
+                } = walk.as_ref().clone();
+                ragged_weights_op(sigma, [delta, offsets], settings).reshape(shape)
             }
         }
     }
@@ -91,51 +102,14 @@ impl RaySpans {
     }
 }
 
-/// [`composite_ragged`]'s weights in the padded layout `[S·R, widest ray]` (zeros past each
-/// ray's samples and behind its stop), computed on the host: they choose where a coarse-to-fine
-/// render samples next, which composites padded rows and never asks a ragged composite.
-fn padded_weights(sigma: &Tensor<2>, spans: &RaySpans, stop_below: f32) -> Tensor<2> {
-    let ([styles, n], device) = (sigma.dims(), sigma.device());
-    let host = |t: &Tensor<1>| t.clone().into_data().convert::<f32>().try_to_vec::<f32>();
-    let sigma = host(&sigma.clone().reshape([styles * n])).expect("f32 densities");
-    let delta = host(&spans.delta).expect("f32 lengths");
-    let offsets: Vec<usize> = host(&spans.offsets)
-        .expect("f32 offsets")
-        .iter()
-        .map(|&o| o as usize)
-        .collect();
-    let rays = spans.rays();
-    let width = offsets
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .max()
-        .unwrap_or(0)
-        .max(1);
-    let mut out = vec![0.0f32; styles * rays * width];
-    for (row, dst) in out.chunks_exact_mut(width).enumerate() {
-        let (style, r) = (row / rays, row % rays);
-        let mut clear = 1.0f32;
-        for (k, w) in (offsets[r]..offsets[r + 1]).zip(dst) {
-            if clear < stop_below {
-                break;
-            }
-            let through = (-(sigma[style * n + k] * delta[k])).exp();
-            *w = clear * (1.0 - through);
-            clear *= through;
-        }
-    }
-    Tensor::<1>::from_floats(out.as_slice(), &device).reshape([styles * rays, width])
-}
-
 /// Composites marched samples without a padded layout: `sigma [S, N]` and `rgb [S, N, 3]` under
 /// `S` styles, ray `r`'s samples the rows `spans` gives it; `S·R` rays out (style-major), as
 /// [`composite`] gives them for the same samples padded. Each ray stops where the transmittance
 /// in front of a sample falls below `stop_below` (0: never): the samples behind get no weight
 /// and no gradient, as if the host had kept only those in front
 /// ([`MarchedSamples::until_opaque`](super::marched_samples::MarchedSamples::until_opaque)).
-/// On Flex and the CubeCL backends ([`crate::kernels::composite::ragged`]); its weights come
-/// padded, `[S·R, widest ray]`, computed on the host. The offsets travel as f32, exact up to
-/// 2²⁴ samples a call: renders go in chunks far below that.
+/// On Flex and the CubeCL backends ([`crate::kernels::composite::ragged`]). The offsets travel
+/// as f32, exact up to 2²⁴ samples a call: renders go in chunks far below that.
 pub fn composite_ragged(
     sigma: Tensor<2>,
     rgb: Tensor<3>,
@@ -146,13 +120,20 @@ pub fn composite_ragged(
     let rows = sigma.dims()[0] * spans.rays();
     let [r, g, b] = background;
     let settings = Tensor::<1>::from_floats([r, g, b, stop_below], &sigma.device());
-    let layout = [spans.t.clone(), spans.delta.clone(), spans.offsets.clone()];
-    let out = ragged_composite_op(sigma.clone(), rgb, layout, settings);
+    let RaySpans { t, delta, offsets } = spans;
+    let layout = [t, delta.clone(), offsets.clone()];
+    let out = ragged_composite_op(sigma.clone(), rgb, layout, settings.clone());
     Composite {
         rgb: out.clone().slice([0..rows, 0..3]),
         depth: out.clone().slice([0..rows, 3..4]).reshape([rows]),
         opacity: out.slice([0..rows, 4..5]).reshape([rows]),
-        weights: Weights::Ragged(Box::new((sigma.detach(), spans, stop_below))),
+        weights: Weights::Later(Box::new(WalkInputs {
+            shape: sigma.dims(),
+            sigma: sigma.detach(),
+            delta,
+            offsets,
+            settings,
+        })),
     }
 }
 
@@ -160,9 +141,9 @@ pub fn composite_ragged(
 /// each ray that nothing stops shows `background` (white for NeRF-synthetic scenes, black
 /// elsewhere).
 ///
-/// On the GPU backends this is one kernel forward and one backward
-/// ([`crate::kernels::composite`]) when `t` and `delta` take no gradient (they never do in a
-/// render: they are the samples' places); elsewhere, ordinary ops.
+/// Through [`composite_ragged`]'s op, each ray a run of `S` rows, when the samples are f32 and
+/// `t` and `delta` take no gradient (they never do in a render: they are the samples'
+/// places); otherwise [`composite_by_ops`].
 pub fn composite(
     sigma: Tensor<2>,
     rgb: Tensor<3>,
@@ -171,21 +152,41 @@ pub fn composite(
     background: [f32; 3],
 ) -> Composite {
     let [r, s] = sigma.dims();
-    let device = sigma.device();
-    let bg = Tensor::<1>::from_floats(background, &device);
     let dtypes = [sigma.dtype(), rgb.dtype(), t.dtype(), delta.dtype()];
-    if s > 0 && cube_f32(&device, &dtypes) && !t.is_tracked() && !delta.is_tracked() {
-        let out = composite_op(sigma.clone(), rgb, t, delta.clone(), bg);
-        return Composite {
-            rgb: out.clone().slice([0..r, 0..3]),
-            depth: out.clone().slice([0..r, 3..4]).reshape([r]),
-            opacity: out.slice([0..r, 4..5]).reshape([r]),
-            weights: Weights::Later {
-                sigma: sigma.detach(),
-                delta: delta.detach(),
-            },
-        };
+    let f32 = dtypes.iter().all(|d| *d == DType::F32);
+    if s == 0 || !f32 || t.is_tracked() || delta.is_tracked() {
+        return composite_by_ops(sigma, rgb, t, delta, background);
     }
+    let runs: Vec<f32> = (0..=r).map(|i| (i * s) as f32).collect();
+    let spans = RaySpans {
+        t: t.reshape([r * s]),
+        delta: delta.reshape([r * s]),
+        offsets: Tensor::from_floats(runs.as_slice(), &sigma.device()),
+    };
+    let mut c = composite_ragged(
+        sigma.reshape([1, r * s]),
+        rgb.reshape([1, r * s, 3]),
+        spans,
+        background,
+        0.0,
+    );
+    if let Weights::Later(walk) = &mut c.weights {
+        walk.shape = [r, s];
+    }
+    c
+}
+
+/// [`composite`] in Burn's ordinary ops (a running sum, exponentials, products, sums), for
+/// inputs the op does not take; the reference the op is tested against.
+pub fn composite_by_ops(
+    sigma: Tensor<2>,
+    rgb: Tensor<3>,
+    t: Tensor<2>,
+    delta: Tensor<2>,
+    background: [f32; 3],
+) -> Composite {
+    let r = sigma.dims()[0];
+    let bg = Tensor::<1>::from_floats(background, &sigma.device());
     let w = weights(sigma, delta);
     let colour: Tensor<2> = (w.clone().unsqueeze_dim::<3>(2) * rgb)
         .sum_dim(1)
@@ -340,13 +341,27 @@ mod tests {
             worst(a.clone().reshape([6, 1]), b.reshape([6, 1])) < 1e-6,
             "opacities"
         );
-        // The weights (padded, as wide as the widest ray) stop there too: they sum to it.
-        let summed = stopped.weights().sum_dim(1);
-        assert!(worst(summed, a.clone().reshape([6, 1])) < 1e-6, "weights");
+        // The weights (at the samples) stop there too: each ray's sum to its opacity, none
+        // behind.
+        let host = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+        let (w, opacity) = (host(stopped.weights()), host(a.clone().reshape([1, 6])));
+        for (r, run) in m.offsets.windows(2).enumerate() {
+            let own = &w[run[0] as usize..run[1] as usize];
+            let sum: f32 = own.iter().sum();
+            assert!(
+                (sum - opacity[r]).abs() < 1e-6,
+                "ray {r}'s weights sum to {sum}"
+            );
+        }
+        for (k, w) in w.iter().enumerate() {
+            assert!(
+                kept.contains(&(k as u32)) || *w == 0.0,
+                "sample {k} lies behind"
+            );
+        }
         let probe = Tensor::<2>::from_floats([[1.0, -2.0, 0.5]; 6], &d);
         let g = (stopped.rgb * probe.clone()).sum().backward();
         let g_front = (front.rgb * probe).sum().backward();
-        let host = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
         // The kept samples' composite picked them out of the same densities: its gradient is
         // over all of them, zero behind.
         let (got, want) = (
@@ -364,9 +379,10 @@ mod tests {
         }
     }
 
-    /// The ragged composite against the padded one (ordinary ops) on the same samples: colours,
-    /// depths, opacities, the weights, and the gradients of densities and colours, under two
-    /// styles, with a ray of no samples, one of one and a dense one.
+    /// The ragged composite, and the padded samples through the op as runs of one width,
+    /// against the padded samples in ordinary ops: colours, depths, opacities, the weights, and
+    /// the gradients of densities and colours, under two styles, with a ray of no samples, one
+    /// of one and a dense one.
     #[test]
     fn the_ragged_composite_is_the_padded_one() {
         use burn::tensor::Distribution;
@@ -408,24 +424,25 @@ mod tests {
         // The same samples padded: zero density and spacing past each ray's own.
         let index = Tensor::<1, Int>::from_data(TensorData::new(index, [rays * width]), &d);
         let pad = |x: Tensor<2>| Tensor::cat(vec![x, Tensor::zeros([styles, 1], &d)], 1);
-        let sigma_p = pad(sigma.clone())
-            .select(1, index.clone())
-            .reshape([styles * rays, width]);
-        let rgb_p = Tensor::cat(vec![rgb.clone(), Tensor::zeros([styles, 1, 3], &d)], 1)
-            .select(1, index.clone())
-            .reshape([styles * rays, width, 3]);
         let host_row = |v: &[f32]| {
             pad(Tensor::<1>::from_floats(v, &d)
                 .reshape([1, n])
                 .repeat_dim(0, styles))
         };
-        let t_p = host_row(&t)
-            .select(1, index.clone())
-            .reshape([styles * rays, width]);
-        let delta_p = host_row(&delta)
-            .select(1, index)
-            .reshape([styles * rays, width]);
-        let padded = composite(sigma_p, rgb_p, t_p, delta_p, bg);
+        let at = |x: Tensor<2>| x.select(1, index.clone()).reshape([styles * rays, width]);
+        // Picked anew for each composite: a backward consumes the picks' graph.
+        let padded_samples = || {
+            let rgb_p = Tensor::cat(vec![rgb.clone(), Tensor::zeros([styles, 1, 3], &d)], 1)
+                .select(1, index.clone())
+                .reshape([styles * rays, width, 3]);
+            let (t, delta) = (at(host_row(&t)), at(host_row(&delta)));
+            (at(pad(sigma.clone())), rgb_p, t, delta)
+        };
+        let (sigma_p, rgb_p, t_p, delta_p) = padded_samples();
+        let padded = composite_by_ops(sigma_p, rgb_p, t_p, delta_p, bg);
+        // The same padded samples through the op, each ray a run as wide as the widest.
+        let (sigma_p, rgb_p, t_p, delta_p) = padded_samples();
+        let runs = composite(sigma_p, rgb_p, t_p, delta_p, bg);
         let worst = |a: Tensor<2>, b: Tensor<2>| (a - b).abs().max().into_scalar::<f32>();
         let col = |x: Tensor<1>| x.reshape([styles * rays, 1]);
         assert!(
@@ -437,12 +454,25 @@ mod tests {
             "depths"
         );
         assert!(worst(col(ragged.opacity.clone()), col(padded.opacity.clone())) < 1e-5);
-        assert!(worst(ragged.weights(), padded.weights()) < 1e-5, "weights");
-        let (g, g_p) = (loss(&ragged).backward(), loss(&padded).backward());
-        let gs = worst(sigma.grad(&g).unwrap(), sigma.grad(&g_p).unwrap());
-        assert!(gs < 1e-5, "density gradients differ by {gs}");
+        // The ragged weights at the samples, laid out as the padded ones.
+        let at_samples = at(pad(ragged.weights()));
+        assert!(worst(at_samples, padded.weights()) < 1e-5, "weights");
+        assert!(
+            worst(runs.weights(), padded.weights()) < 1e-5,
+            "weights in runs"
+        );
         let flat = |x: Tensor<3>| x.reshape([styles * n, 3]);
-        let gc = worst(flat(rgb.grad(&g).unwrap()), flat(rgb.grad(&g_p).unwrap()));
-        assert!(gc < 1e-5, "colour gradients differ by {gc}");
+        let g_p = loss(&padded).backward();
+        for (c, name) in [(&ragged, "ragged"), (&runs, "runs")] {
+            assert!(
+                worst(c.rgb.clone(), padded.rgb.clone()) < 1e-5,
+                "{name} colours"
+            );
+            let g = loss(c).backward();
+            let gs = worst(sigma.grad(&g).unwrap(), sigma.grad(&g_p).unwrap());
+            assert!(gs < 1e-5, "{name}: density gradients differ by {gs}");
+            let gc = worst(flat(rgb.grad(&g).unwrap()), flat(rgb.grad(&g_p).unwrap()));
+            assert!(gc < 1e-5, "{name}: colour gradients differ by {gc}");
+        }
     }
 }

@@ -224,13 +224,13 @@ fn flagged_samples_are_picked_on_wgpu_as_on_the_host() {
     assert_eq!(wgpu, flex, "the picks differ from the host's");
 }
 
-/// Compositing as one kernel forward and one backward (the GPU path) gives flex's ordinary ops'
-/// colours, depths, opacities, weights (a kernel of their own) and the gradients of densities and
-/// colours: rays that turn opaque, rays nearly empty, rays ending in padding (δ = 0), a white
-/// background, and a loss that weighs all three outputs.
+/// Padded samples composited as runs of one width, one kernel forward and one backward (the GPU
+/// path), give the ordinary ops' colours, depths, opacities, weights (a kernel of their own) and
+/// the gradients of densities and colours, on flex: rays that turn opaque, rays nearly empty,
+/// rays ending in padding (δ = 0), a white background, and a loss that weighs all three outputs.
 #[test]
 fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
-    use ins_core::render::volume::composite;
+    use ins_core::render::volume::{composite, composite_by_ops};
     let (rays, samples) = (37usize, 45usize);
     let mut sigma = Vec::new();
     let (mut t, mut delta, mut rgb, mut probe) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -259,7 +259,7 @@ fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
             1.0 - 0.1 * (r % 5) as f32,
         ]);
     }
-    let on = move |device: &Device| -> Vec<Vec<f32>> {
+    let on = move |device: &Device, reference: bool| -> Vec<Vec<f32>> {
         let device = device.clone().autodiff();
         let field =
             |v: &[f32], shape: [usize; 2]| Tensor::<1>::from_floats(v, &device).reshape(shape);
@@ -267,7 +267,11 @@ fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
         let rgb = Tensor::<1>::from_floats(rgb.as_slice(), &device)
             .reshape([rays, samples, 3])
             .require_grad();
-        let c = composite(
+        let c = (if reference {
+            composite_by_ops
+        } else {
+            composite
+        })(
             sigma.clone(),
             rgb.clone(),
             field(&t, [rays, samples]),
@@ -291,9 +295,9 @@ fn compositing_in_one_kernel_matches_the_ordinary_ops_on_wgpu() {
             values(rgb.grad(&grads).unwrap().reshape([rays, samples * 3])),
         ]
     };
-    let flex = on(&Device::flex());
+    let flex = on(&Device::flex(), true);
     let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "compositing", move || {
-        on(&BackendChoice::Wgpu.device())
+        on(&BackendChoice::Wgpu.device(), false)
     });
     for (i, what) in ["outputs", "weights", "density gradient", "colour gradient"]
         .iter()

@@ -1,14 +1,11 @@
-//! Volume compositing (NeRF's quadrature) as one kernel a pass on the GPU backends, where the
-//! ordinary ops of [`crate::render::volume::composite`] (a running sum, exponentials, products
-//! and three sums, and twice as many in the backward: about 25 launches a composite and as many
-//! `[R, S]` intermediates in memory) become one launch forward and one backward.
+//! Volume compositing (NeRF's quadrature) as backend operations: one walk a ray forward, two
+//! backward, where Burn's ordinary ops (a running sum, exponentials, products and three sums,
+//! and twice as many in the backward) took about 25 launches a composite on a GPU and as many
+//! intermediates in memory.
 //!
-//! - [`cube`]: the forward and backward as CubeCL kernels, one unit a ray.
-//! - [`op`]: a Burn op with that backward, under autodiff and Fusion.
-//! - [`ragged`], [`ragged_cube`]: compositing straight from each ray's run of marched samples
-//!   (no padded layout), on Flex and as CubeCL kernels.
+//! - [`ragged`]: the op over each ray's run of samples, under autodiff and Fusion, and its
+//!   Flex implementation.
+//! - [`ragged_cube`]: its CubeCL kernels, one unit a ray.
 
-pub mod cube;
-pub mod op;
 pub mod ragged;
 pub mod ragged_cube;

@@ -1,13 +1,14 @@
-//! Compositing straight from the marched samples, each ray's samples one run of rows, as
-//! nerfacc composites packed samples: no padded `[R, width]` layout.
+//! Compositing each ray's samples as one run of rows, as nerfacc composites packed samples:
+//! no padded `[R, width]` layout.
 //!
-//! A grid NeRF's rays get 1 to ~200 samples (20 on average on lego), so the padded layout of
-//! [`crate::render::volume::composite`] held ten times the samples: picking the samples into it
-//! and the ordinary ops over it (a running sum, exponentials, products, sums, and their
-//! backward) cost about a quarter of a pretraining step on 2 cores; on a GPU, two gathers and
-//! their scatters over the padded cells and a walk through every padded row. Here one pass a
-//! ray forward and two backward (the gradients of [`super::cube`]): a loop per ray on Flex,
-//! rays split between threads, and [`super::ragged_cube`]'s kernels on the GPU backends.
+//! A grid NeRF's rays get 1 to ~200 samples (20 on average on lego), so a padded layout held
+//! ten times the samples: picking the samples into it and Burn's ordinary ops over it (a
+//! running sum, exponentials, products, sums, and their backward; about 25 launches on a GPU)
+//! cost about a quarter of a pretraining step on 2 cores. Here one walk a ray forward, two
+//! backward, one for the detached weights: a loop per ray on Flex, rays split between threads,
+//! and [`super::ragged_cube`]'s kernels on the GPU backends. Samples in a padded layout (the
+//! MLP NeRF's, every ray as many) are runs of equal length
+//! ([`crate::render::volume::composite`]).
 //!
 //! Inputs: `sigma [S, N]`, `rgb [S, N, 3]` under `S` styles, each sample's distance `t [N]` and
 //! length `delta [N]`, where each ray's samples start `offsets [R + 1]` (f32, exact below
@@ -33,7 +34,6 @@ use burn_cubecl::CubeBackend;
 use burn_cubecl::tensor::CubeTensor;
 use rayon::prelude::*;
 
-use super::cube::OUTPUTS;
 use super::ragged_cube;
 
 /// Compositing's forward and backward over runs of samples as backend operations (see the
@@ -62,6 +62,16 @@ pub trait RaggedCompositeOps: Backend {
         settings: FloatTensor<Self>,
         grad: FloatTensor<Self>,
     ) -> (FloatTensor<Self>, FloatTensor<Self>);
+
+    /// `[S, N]`: each sample's weight `T_k (1 − e^{−σ_k δ_k})` as the forward walks it (0
+    /// behind a ray's stop and on rows no ray reads), without gradient: where to sample next.
+    #[fusion(dtype = sigma, shape = Shape::new([sigma[0], sigma[1]]))]
+    fn ragged_weights(
+        sigma: FloatTensor<Self>,
+        delta: FloatTensor<Self>,
+        offsets: FloatTensor<Self>,
+        settings: FloatTensor<Self>,
+    ) -> FloatTensor<Self>;
 }
 
 impl RaggedCompositeOps for CubeBackend {
@@ -87,41 +97,46 @@ impl RaggedCompositeOps for CubeBackend {
     ) -> (CubeTensor, CubeTensor) {
         ragged_cube::backward(sigma, rgb, t, delta, offsets, settings, grad)
     }
+
+    fn ragged_weights(
+        sigma: CubeTensor,
+        delta: CubeTensor,
+        offsets: CubeTensor,
+        settings: CubeTensor,
+    ) -> CubeTensor {
+        ragged_cube::weights(sigma, delta, offsets, settings)
+    }
 }
 
 /// Rays a parallel job composites on Flex.
 const RAYS_A_JOB: usize = 256;
 
-/// The inputs on the host (Flex: no copy where contiguous).
-struct Host {
+/// Values a ray composites to: colour, depth, opacity.
+pub const OUTPUTS: usize = 5;
+
+/// What every pass walks, on the host (Flex: no copy where contiguous): the densities, the
+/// lengths, where each ray's run starts, the background and the stop.
+struct Runs {
     sigma: FlexTensor,
-    rgb: FlexTensor,
-    t: FlexTensor,
     delta: FlexTensor,
     offsets: Vec<usize>,
     background: [f32; 3],
     stop_below: f32,
 }
 
-impl Host {
-    fn new(tensors: [FlexTensor; 6]) -> Self {
-        let names = [
-            "densities",
-            "colours",
-            "distances",
-            "spacings",
-            "ray offsets",
-            "settings",
-        ];
-        let [sigma, rgb, t, delta, offsets, settings] = tensors;
-        for (x, name) in [&sigma, &rgb, &t, &delta, &offsets, &settings]
-            .iter()
-            .zip(names)
-        {
-            assert_eq!(x.dtype(), DType::F32, "compositing runs in f32 ({name})");
-        }
-        let f = |x: FlexTensor| x.to_contiguous();
-        let (offsets, settings) = (f(offsets), f(settings));
+/// A tensor the op reads, contiguous, after checking it is f32.
+fn host_f32(x: FlexTensor, name: &str) -> FlexTensor {
+    assert_eq!(x.dtype(), DType::F32, "compositing runs in f32 ({name})");
+    x.to_contiguous()
+}
+
+impl Runs {
+    fn new([sigma, delta, offsets, settings]: [FlexTensor; 4]) -> Self {
+        let (sigma, delta) = (host_f32(sigma, "densities"), host_f32(delta, "spacings"));
+        let (offsets, settings) = (
+            host_f32(offsets, "ray offsets"),
+            host_f32(settings, "settings"),
+        );
         let settings = settings.as_slice::<f32>().unwrap();
         let offsets: Vec<usize> = offsets
             .as_slice::<f32>()
@@ -129,11 +144,8 @@ impl Host {
             .iter()
             .map(|&o| o as usize)
             .collect();
-        let (s, c, n) = (sigma.shape(), rgb.shape(), t.shape()[0]);
-        assert!(
-            s[1] == n && c[0] == s[0] && c[1] == n && c[2] == 3 && delta.shape()[0] == n,
-            "compositing {s:?} densities, {c:?} colours, {n} distances"
-        );
+        let (s, n) = (sigma.shape(), delta.shape()[0]);
+        assert!(s[1] == n, "compositing {s:?} densities, {n} spacings");
         assert!(
             !offsets.is_empty()
                 && offsets.windows(2).all(|w| w[0] <= w[1])
@@ -141,14 +153,25 @@ impl Host {
             "ray offsets for {n} samples"
         );
         Self {
-            sigma: f(sigma),
-            rgb: f(rgb),
-            t: f(t),
-            delta: f(delta),
+            sigma,
+            delta,
             offsets,
             background: [settings[0], settings[1], settings[2]],
             stop_below: settings[3],
         }
+    }
+
+    /// The colours `[S, N, 3]` and distances `[N]` the forward and backward read too.
+    fn shading(&self, rgb: FlexTensor, t: FlexTensor) -> (FlexTensor, FlexTensor) {
+        let (rgb, t) = (host_f32(rgb, "colours"), host_f32(t, "distances"));
+        let (c, n) = (rgb.shape(), self.samples());
+        assert!(
+            c[0] == self.styles() && c[1] == n && c[2] == 3 && t.shape()[0] == n,
+            "compositing {:?} densities, {c:?} colours, {} distances",
+            self.sigma.shape(),
+            t.shape()[0]
+        );
+        (rgb, t)
     }
 
     fn styles(&self) -> usize {
@@ -160,7 +183,7 @@ impl Host {
     }
 
     fn samples(&self) -> usize {
-        self.t.shape()[0]
+        self.delta.shape()[0]
     }
 
     /// Ray `r`'s samples under style `style`, front to back until the stop: each sample's row
@@ -180,6 +203,25 @@ impl Host {
             })
             .take_while(|&(_, front, _)| front >= self.stop_below)
     }
+
+    /// Each style's and ray's own rows of a `[S, N, width]` output, in order (rows no ray
+    /// reads, a bucket's padding, are passed over): `(ray, style, rows)`.
+    fn split<'a>(&self, out: &'a mut [f32], width: usize) -> Vec<(usize, usize, &'a mut [f32])> {
+        let (styles, rays, n) = (self.styles(), self.rays(), self.samples());
+        let mut runs = Vec::with_capacity(styles * rays);
+        let (mut rest, mut at) = (out, 0);
+        for style in 0..styles {
+            for r in 0..rays {
+                let first = style * n + self.offsets[r];
+                let len = self.offsets[r + 1] - self.offsets[r];
+                let (_, tail) = std::mem::take(&mut rest).split_at_mut(width * (first - at));
+                let (own, tail) = tail.split_at_mut(width * len);
+                (rest, at) = (tail, first + len);
+                runs.push((r, style, own));
+            }
+        }
+        runs
+    }
 }
 
 impl RaggedCompositeOps for Flex {
@@ -191,12 +233,10 @@ impl RaggedCompositeOps for Flex {
         offsets: FlexTensor,
         settings: FlexTensor,
     ) -> FlexTensor {
-        let h = Host::new([sigma, rgb, t, delta, offsets, settings]);
+        let h = Runs::new([sigma, delta, offsets, settings]);
+        let (rgb, t) = h.shading(rgb, t);
         let (rays, n) = (h.rays(), h.samples());
-        let (rgb, t) = (
-            h.rgb.as_slice::<f32>().unwrap(),
-            h.t.as_slice::<f32>().unwrap(),
-        );
+        let (rgb, t) = (rgb.as_slice::<f32>().unwrap(), t.as_slice::<f32>().unwrap());
         let mut out = vec![0.0f32; h.styles() * rays * OUTPUTS];
         out.par_chunks_mut(RAYS_A_JOB * OUTPUTS)
             .enumerate()
@@ -231,39 +271,22 @@ impl RaggedCompositeOps for Flex {
         settings: FlexTensor,
         grad: FlexTensor,
     ) -> (FlexTensor, FlexTensor) {
-        let h = Host::new([sigma, rgb, t, delta, offsets, settings]);
-        assert_eq!(
-            grad.dtype(),
-            DType::F32,
-            "compositing runs in f32 (upstream gradient)"
-        );
-        let grad = grad.to_contiguous();
+        let h = Runs::new([sigma, delta, offsets, settings]);
+        let (rgb, t) = h.shading(rgb, t);
+        let grad = host_f32(grad, "upstream gradient");
         let grad = grad.as_slice::<f32>().unwrap();
         let (styles, rays, n) = (h.styles(), h.rays(), h.samples());
-        let (rgb, t) = (
-            h.rgb.as_slice::<f32>().unwrap(),
-            h.t.as_slice::<f32>().unwrap(),
-        );
+        let (rgb, t) = (rgb.as_slice::<f32>().unwrap(), t.as_slice::<f32>().unwrap());
         let delta = h.delta.as_slice::<f32>().unwrap();
         let mut g_sigma = vec![0.0f32; styles * n];
         let mut g_rgb = vec![0.0f32; styles * n * 3];
-        // Each ray of each style owns its run of both outputs: split them there, in order
-        // (rows no ray reads, a bucket's padding, are passed over).
-        let mut runs = Vec::with_capacity(styles * rays);
-        let (mut gs, mut gc, mut at) = (&mut g_sigma[..], &mut g_rgb[..], 0);
-        for style in 0..styles {
-            for r in 0..rays {
-                let (first, len) = (style * n + h.offsets[r], h.offsets[r + 1] - h.offsets[r]);
-                let (_, rest) = std::mem::take(&mut gs).split_at_mut(first - at);
-                let (a, rest_s) = rest.split_at_mut(len);
-                let (_, rest) = std::mem::take(&mut gc).split_at_mut(3 * (first - at));
-                let (b, rest_c) = rest.split_at_mut(3 * len);
-                (gs, gc, at) = (rest_s, rest_c, first + len);
-                runs.push((r, style, a, b));
-            }
-        }
-        runs.par_iter_mut().for_each(|(r, style, gs, gc)| {
-            let (r, style) = (*r, *style);
+        let runs: Vec<_> = h
+            .split(&mut g_sigma, 1)
+            .into_iter()
+            .zip(h.split(&mut g_rgb, 3))
+            .map(|((r, style, gs), (_, _, gc))| (r, style, gs, gc))
+            .collect();
+        runs.into_par_iter().for_each(|(r, style, gs, gc)| {
             let g = &grad[(style * rays + r) * OUTPUTS..][..OUTPUTS];
             // What a unit of weight is worth against the background, whatever the sample.
             let bg = h.background;
@@ -292,11 +315,29 @@ impl RaggedCompositeOps for Flex {
                 }
             }
         });
-        drop(runs);
         (
             FlexTensor::from_data(TensorData::new(g_sigma, [styles, n])),
             FlexTensor::from_data(TensorData::new(g_rgb, [styles, n, 3])),
         )
+    }
+
+    fn ragged_weights(
+        sigma: FlexTensor,
+        delta: FlexTensor,
+        offsets: FlexTensor,
+        settings: FlexTensor,
+    ) -> FlexTensor {
+        let h = Runs::new([sigma, delta, offsets, settings]);
+        let (styles, n) = (h.styles(), h.samples());
+        let mut out = vec![0.0f32; styles * n];
+        h.split(&mut out, 1)
+            .into_par_iter()
+            .for_each(|(r, style, own)| {
+                for ((_, front, through), w) in h.walk(r, style).zip(own) {
+                    *w = front * (1.0 - through);
+                }
+            });
+        FlexTensor::from_data(TensorData::new(out, [styles, n]))
     }
 }
 
@@ -378,6 +419,20 @@ impl<B: Backend + RaggedCompositeOps, C: CheckpointStrategy> RaggedCompositeOps 
             <Self as AutodiffBackend>::from_inner(grad_rgb),
         )
     }
+
+    fn ragged_weights(
+        sigma: FloatTensor<Self>,
+        delta: FloatTensor<Self>,
+        offsets: FloatTensor<Self>,
+        settings: FloatTensor<Self>,
+    ) -> FloatTensor<Self> {
+        <Self as AutodiffBackend>::from_inner(B::ragged_weights(
+            sigma.into_primitive(),
+            delta.into_primitive(),
+            offsets.into_primitive(),
+            settings.into_primitive(),
+        ))
+    }
 }
 
 /// `[S·R, 5]` (style-major rays: colour, depth, opacity) through the op (see the module for
@@ -392,6 +447,21 @@ pub fn ragged_composite_op(
         sigma.into_dispatch(),
         rgb.into_dispatch(),
         t.into_dispatch(),
+        delta.into_dispatch(),
+        offsets.into_dispatch(),
+        settings.into_dispatch(),
+    ))
+}
+
+/// `[S, N]`: [`ragged_composite_op`]'s weights at each sample (see
+/// [`RaggedCompositeOps::ragged_weights`]), detached.
+pub fn ragged_weights_op(
+    sigma: Tensor<2>,
+    [delta, offsets]: [Tensor<1>; 2],
+    settings: Tensor<1>,
+) -> Tensor<2> {
+    Tensor::from_dispatch(<Dispatch as RaggedCompositeOps>::ragged_weights(
+        sigma.detach().into_dispatch(),
         delta.into_dispatch(),
         offsets.into_dispatch(),
         settings.into_dispatch(),
