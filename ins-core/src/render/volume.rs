@@ -28,7 +28,7 @@ pub struct Composite {
 /// the op's own walk if asked for (the compositing kernel does not write them).
 #[derive(Debug, Clone)]
 enum Weights {
-    Computed(Tensor<2>),
+    Computed(Box<Tensor<2>>),
     /// The op's inputs: the densities `[S, N]`, the lengths and offsets, the settings, and
     /// the layout the samples came in.
     Later(Box<WalkInputs>),
@@ -48,7 +48,7 @@ impl Composite {
     /// own layout: `[R, S]` from [`composite`], `[S, N]` from [`composite_ragged`].
     pub fn weights(&self) -> Tensor<2> {
         match &self.weights {
-            Weights::Computed(w) => w.clone(),
+            Weights::Computed(w) => w.as_ref().clone(),
             Weights::Later(walk) => {
                 let WalkInputs {
                     sigma,
@@ -198,7 +198,7 @@ pub fn composite_by_ops(
         rgb: colour + rest * bg.reshape([1, 3]),
         depth,
         opacity,
-        weights: Weights::Computed(w.detach()),
+        weights: Weights::Computed(Box::new(w.detach())),
     }
 }
 
