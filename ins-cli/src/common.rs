@@ -44,7 +44,7 @@ pub struct VggArgs {
     pub cache: Option<PathBuf>,
     /// Arithmetic of the VGG convolutions: f32; bf16 (BF16 products with f32 sums on Intel AMX
     /// or by AVX-512 BF16, on flex; f32 on CPUs with neither); or f16 (Burn's convolution in
-    /// half precision on a wgpu adapter with f16 shaders; f32 elsewhere). Default: bf16 where
+    /// half precision on a GPU: CUDA, or a wgpu adapter with f16 shaders; f32 elsewhere). Default: bf16 where
     /// the CPU has either, else f32. f32 also keeps the dense products of a NeRF field and of
     /// SIREN's hidden layers in f32 (bf16 by default where the CPU has AVX-512 BF16).
     #[arg(long, value_name = "P")]
@@ -84,8 +84,8 @@ impl VggArgs {
                  --precision f16 for half precision on a GPU)"
             ),
             (Precision::F16, Precision::F32) => eprintln!(
-                "--precision f16: this device has no f16 arithmetic (f16 runs on a wgpu adapter \
-                 with f16 shaders); VGG runs in f32"
+                "--precision f16: this device has no f16 arithmetic (f16 runs on CUDA and on a \
+                 wgpu adapter with f16 shaders); VGG runs in f32"
             ),
             (_, Precision::Bf16) => eprintln!(
                 "VGG convolutions in {} (--precision f32 for f32)",

@@ -26,6 +26,9 @@ missing=$(missing_rows cuda $CUDA_WORKLOADS)
 stage bench_cuda_channel 60 env CUBECL_DEVICE_HANDLE=channel $BIN bench --backend cuda --steps 3 siren vgg nerf-pretrain nerf-grid
 stage torch 40 python3 .dev/torch_ref.py --device cuda --steps 5
 stage torch_grid 60 python3 scripts/torch_grid_ref.py --device cuda --steps 5
+# VGG's convolutions in f16 on CUDA (tensor cores; opt-in until a GPU shows it faster and as
+# good): the workloads with VGG, against their f32 rows above.
+stage bench_cuda_f16 75 $BIN bench --backend cuda --steps 3 --precision f16 vgg siren nerf-grid-stylize nerf-stylize
 stage bench_ref 90 $BIN bench --backend wgpu --steps 3 siren vgg nerf-pretrain nerf-stylize idr-pretrain nerf-grid
 stage bench_wgpu_channel 45 env CUBECL_DEVICE_HANDLE=channel $BIN bench --backend wgpu --steps 3 siren nerf-grid
 stage lego_pretrain_cuda_cold 120 $BIN train nerf --scene .dev/lego200 --out $R/lego_cuda --quiet --backend cuda
@@ -34,7 +37,24 @@ stage lego_pretrain_cuda_warm 60 $BIN train nerf --scene .dev/lego200 --out $R/l
 metrics $R/lego_cuda2 3
 stage lego_stylize_cuda 90 $BIN train nerf --from $R/lego_cuda --style .dev/starry_night.jpg --out $R/lego_st_cuda --quiet --backend cuda
 metrics $R/lego_st_cuda 3; cp $R/lego_st_cuda/val/final.png "$OUT/lego_stylized_cuda.png" 2>/dev/null
+# The same stylization with VGG in f16: its time, and its losses and picture against f32's.
+stage lego_stylize_cuda_f16 60 $BIN train nerf --from $R/lego_cuda --style .dev/starry_night.jpg --out $R/lego_st_cuda_f16 --quiet --backend cuda --precision f16
+metrics $R/lego_st_cuda_f16 3; cp $R/lego_st_cuda_f16/val/final.png "$OUT/lego_stylized_cuda_f16.png" 2>/dev/null
 stage siren_cuda 30 $BIN train siren --quiet --out $R/siren_cuda --backend cuda
+# The real VGG-16's features and style gradient in f16 against f32 on CUDA
+# (tests/tests/library/vgg_import.rs; the wgpu run of the same test is the last stage). The test
+# binary finds its fixtures where it was built.
+library_test() { # library_test STAGE TIMEOUT [ENV=VALUE...] TEST
+  [ -f .dev/library.xz ] || return
+  [ -x /tmp/library ] || unpack library
+  local src; src=$(cat .dev/source_root)
+  [ -e "$src" ] || { mkdir -p "$(dirname "$src")"; ln -s "$PWD" "$src"; }
+  local name=$1 limit=$2; shift 2
+  (cd "$src/tests" && stage "$name" "$limit" env "${@:1:$#-1}" /tmp/library --ignored --exact \
+    --nocapture "${@: -1}")
+}
+library_test vgg_f16_real_cuda 120 INS_GPU_TEST_BACKEND=cuda \
+  vgg_import::f16_features_on_the_real_network_stay_close_to_f32
 # 1. lego 200² with the defaults, kernels not yet compiled or tuned on this machine.
 stage lego_pretrain_cold 200 $BIN train nerf --scene .dev/lego200 --out $R/lego --quiet --checkpoint-every 250 --backend wgpu
 metrics $R/lego 14; cp $R/lego/val/final.png "$OUT/lego_pretrained.png" 2>/dev/null
@@ -53,15 +73,10 @@ metrics $R/lego2 3
 stage lego_stylize_warm 90 $BIN train nerf --from $R/lego --style .dev/starry_night.jpg --out $R/lego_st2 --quiet --backend wgpu
 metrics $R/lego_st2 3
 stage siren 60 $BIN train siren --quiet --out $R/siren
-# 6. The real VGG-16 in f16 against f32 (tests/tests/library/vgg_import.rs; ignored in CI,
-# where lavapipe took ten minutes for it). The test binary finds its fixtures where it was built.
-if [ -f .dev/library.xz ]; then
-  unpack library
-  src=$(cat .dev/source_root)
-  [ -e "$src" ] || { mkdir -p "$(dirname "$src")"; ln -s "$PWD" "$src"; }
-  (cd "$src/tests" && stage vgg_f16_real 120 /tmp/library --ignored --exact --nocapture \
-    vgg_import::f16_features_on_the_real_network_stay_close_to_f32)
-fi
+# 6. The real VGG-16 in f16 against f32 on wgpu (ignored in CI, where lavapipe took ten
+# minutes for it).
+library_test vgg_f16_real 120 INS_GPU_TEST_BACKEND=wgpu \
+  vgg_import::f16_features_on_the_real_network_stay_close_to_f32
 stamp "all done"
 # Issue 48's table: GPU (synced and pipelined) against PyTorch on the same GPU and 2 CPU cores.
 python3 scripts/gpu/table.py "$OUT/log.txt" $([ -f .dev/cpu_bench.jsonl ] && echo .dev/cpu_bench.jsonl) > "$OUT/table.md"

@@ -40,7 +40,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 5)]
     steps: usize,
     /// Arithmetic of the VGG convolutions: f32, bf16 (flex, with AMX or AVX-512 BF16; f32 where
-    /// the CPU has neither) or f16 (wgpu, where the adapter has f16 shaders). Default: bf16
+    /// the CPU has neither) or f16 (CUDA, and wgpu where the adapter has f16 shaders). Default: bf16
     /// where the CPU can, as in training. f32 also keeps a NeRF's dense products in f32.
     #[arg(long)]
     precision: Option<Precision>,

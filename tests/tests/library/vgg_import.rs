@@ -218,9 +218,10 @@ fn f16_features_on_wgpu_stay_close_to_f32() {
     });
 }
 
-/// The same check on the real VGG-16. On Mesa's lavapipe its f16 and f32 kernels took about 10
-/// minutes of CI's time for what the small network checks there in seconds, so it runs where
-/// it means something, on a GPU: `scripts/gpu/check.sh` runs it (`--ignored`).
+/// The same check on the real VGG-16, on wgpu, or on CUDA where `INS_GPU_TEST_BACKEND=cuda`.
+/// On Mesa's lavapipe its f16 and f32 kernels took about 10 minutes of CI's time for what the
+/// small network checks there in seconds, so it runs where it means something, on a GPU:
+/// `scripts/gpu/check.sh` runs it (`--ignored`) on both backends.
 #[test]
 #[ignore = "the real VGG-16 in f16 on a GPU: scripts/gpu/check.sh runs it"]
 fn f16_features_on_the_real_network_stay_close_to_f32() {
@@ -228,14 +229,20 @@ fn f16_features_on_the_real_network_stay_close_to_f32() {
 }
 
 /// Features and a style loss's input gradient of `network` in f16 against f32 on the wgpu
-/// adapter (see [`f16_features_on_wgpu_stay_close_to_f32`]).
+/// adapter, or CUDA's GPU where `INS_GPU_TEST_BACKEND=cuda` (see
+/// [`f16_features_on_wgpu_stay_close_to_f32`]).
 fn f16_against_f32_on_wgpu(network: fn(&Device) -> Vgg) {
     use ins_conv::Precision;
+    use ins_core::backend::BackendChoice;
+    let choice = match std::env::var("INS_GPU_TEST_BACKEND").as_deref() {
+        Ok("cuda") => BackendChoice::Cuda,
+        _ => BackendChoice::Wgpu,
+    };
     let (features, gradients, half) = ins_tests::within(
         ins_tests::WGPU_LIMIT_S,
-        "VGG on wgpu in f16 and f32",
+        "VGG on the GPU in f16 and f32",
         move || {
-            let device = ins_core::backend::BackendChoice::Wgpu.device().autodiff();
+            let device = choice.device().autodiff();
             let half = Precision::F16.effective_on(&device) == Precision::F16;
             let f32_vgg = network(&device);
             let f16_vgg = f32_vgg.clone().with_precision(Precision::F16);
@@ -284,13 +291,13 @@ fn f16_against_f32_on_wgpu(network: fn(&Device) -> Vgg) {
         let d = max_rel_diff(gpu, f, 1e-3);
         assert!(
             d < 1e-4,
-            "{name}: wgpu's f32 features differ from Flex's by {d}"
+            "{name}: the GPU's f32 features differ from Flex's by {d}"
         );
     }
     let grad = rel_l2(&gradients.0, &flex_grad);
     assert!(
         grad < 1e-4,
-        "wgpu's f32 input gradient differs from Flex's by {grad} (relative L2)"
+        "the GPU's f32 input gradient differs from Flex's by {grad} (relative L2)"
     );
     if !half {
         eprintln!("this adapter has no f16 shaders: f16 falls back to f32");
