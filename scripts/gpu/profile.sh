@@ -2,7 +2,7 @@
 # Where a GPU step's time goes (issue 48), for the second call of a GPU session after check.sh.
 # Run on the device machine from the repository root with .dev and .gl carried (pack.sh).
 # - Kernel by kernel (CubeCL's profile, summed by profile_summary.py): VGG, the largest gap to
-#   PyTorch (siren's step is mostly VGG), on wgpu and on CUDA; a grid NeRF step, and the
+#   PyTorch (siren's step is mostly VGG), on wgpu and on CUDA (f32 and f16); a grid NeRF step, and the
 #   NeRF pretraining and stylization steps PyTorch's reference also runs, on CUDA.
 # - Sphere tracing's share: an IDR stylization traces its patch's rays against the frozen
 #   surface every step (off a CPU its rounds on the device, four reads a trace); its metrics
@@ -36,6 +36,8 @@ PY
 stamp "setup done"
 profiled prof_vgg_wgpu 60 $BIN bench --backend wgpu --steps 2 vgg
 profiled prof_vgg_cuda 60 $BIN bench --backend cuda --steps 2 vgg
+# The same in f16 (check.sh's bench_cuda_f16 compiled its kernels): tensor-core convolutions?
+profiled prof_vgg_cuda_f16 45 $BIN bench --backend cuda --steps 2 --precision f16 vgg
 profiled prof_nerf_grid_cuda 60 $BIN bench --backend cuda --steps 2 nerf-grid
 # The NeRF workloads PyTorch also runs (its MLP's matmuls, the sampling and compositing kernels).
 profiled prof_nerf_cuda 60 $BIN bench --backend cuda --steps 2 nerf-pretrain nerf-stylize
