@@ -1,8 +1,5 @@
 //! The configuration of an IDR run: `ins-cli train idr` flags and the run's `config.json`.
 
-use std::path::Path;
-
-use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
 use super::eval::ViewOptions;
@@ -183,25 +180,9 @@ pub struct IdrRunConfig {
     pub sdf_lr_ratio: f64,
 }
 
-impl Default for IdrRunConfig {
-    fn default() -> Self {
-        crate::config::clap_defaults()
-    }
-}
-
-crate::run::args::scene_run_config!(IdrRunConfig);
+crate::run::args::scene_run_config!(IdrRunConfig, "a surface");
 
 impl IdrRunConfig {
-    /// Reads a run's `config.json`.
-    pub fn from_file(path: &Path) -> Result<Self> {
-        crate::config::read_json(path)
-    }
-
-    /// Which kind of run this is (see [`SourceArgs::kind`]).
-    pub fn kind(&self) -> Result<RunKind> {
-        self.source.kind(&self.style.styles, "a surface")
-    }
-
     /// The model sizes.
     pub fn arch(&self) -> IdrArch {
         IdrArch {

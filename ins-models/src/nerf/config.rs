@@ -1,8 +1,5 @@
 //! The configuration of a NeRF run: `ins-cli train nerf` flags and the run's `config.json`.
 
-use std::path::Path;
-
-use anyhow::Result;
 use ins_core::modules::field::CimKind;
 use serde::{Deserialize, Serialize};
 
@@ -91,25 +88,9 @@ pub struct NerfRunConfig {
     pub drop_misposed: bool,
 }
 
-impl Default for NerfRunConfig {
-    fn default() -> Self {
-        crate::config::clap_defaults()
-    }
-}
-
-crate::run::args::scene_run_config!(NerfRunConfig);
+crate::run::args::scene_run_config!(NerfRunConfig, "a NeRF");
 
 impl NerfRunConfig {
-    /// Reads a run's `config.json`.
-    pub fn from_file(path: &Path) -> Result<Self> {
-        crate::config::read_json(path)
-    }
-
-    /// Which kind of run this is (see [`SourceArgs::kind`]).
-    pub fn kind(&self) -> Result<RunKind> {
-        self.source.kind(&self.style.styles, "a NeRF")
-    }
-
     /// The model sizes.
     pub fn arch(&self) -> NerfArch {
         NerfArch {

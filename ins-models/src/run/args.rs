@@ -243,10 +243,29 @@ impl Default for StylizerArgs {
 }
 
 /// Implements [`RunConfig`](super::RunConfig) for a scene variant's config made of the shared
-/// groups: its paintings in `style`, its seed in `schedule`, its pretrained run in
-/// `source.from`.
+/// groups (its paintings in `style`, its seed in `schedule`, its pretrained run in
+/// `source.from`), and what every such config has: clap's defaults, `from_file` (a run's
+/// `config.json`) and `kind` (`$what` names the pretrained model a stylization needs, "a NeRF").
 macro_rules! scene_run_config {
-    ($config:ty) => {
+    ($config:ty, $what:literal) => {
+        impl Default for $config {
+            fn default() -> Self {
+                $crate::config::clap_defaults()
+            }
+        }
+
+        impl $config {
+            /// Reads a run's `config.json`.
+            pub fn from_file(path: &std::path::Path) -> anyhow::Result<Self> {
+                $crate::config::read_json(path)
+            }
+
+            /// Which kind of run this is (see `SourceArgs::kind`).
+            pub fn kind(&self) -> anyhow::Result<$crate::run::RunKind> {
+                self.source.kind(&self.style.styles, $what)
+            }
+        }
+
         impl $crate::run::RunConfig for $config {
             fn style(&self) -> &$crate::run::StyleArgs {
                 &self.style
