@@ -208,6 +208,26 @@ fn inputs(tensors: [CubeTensor; 6]) -> [CubeTensor; 6] {
     tensors.map(into_contiguous)
 }
 
+/// Per-sample outputs of `shapes` for the backward and weights kernels, which write every row:
+/// allocated empty, with the units to launch (one a ray of a style), or zeros and no units where
+/// there is no ray or no sample.
+fn per_sample<const K: usize>(
+    sigma: &CubeTensor,
+    offsets: &CubeTensor,
+    shapes: [Vec<usize>; K],
+) -> (usize, [CubeTensor; K]) {
+    let [styles, n] = [sigma.meta.shape()[0], sigma.meta.shape()[1]];
+    let units = styles * (offsets.meta.shape()[0] - 1);
+    if units == 0 || n == 0 {
+        let zeros = |shape: Vec<usize>| {
+            let (client, device) = (sigma.client.clone(), sigma.device.clone());
+            zeros_client(client, device, shape.into(), sigma.dtype)
+        };
+        return (0, shapes.map(zeros));
+    }
+    (units, shapes.map(|shape| empty_like(sigma, shape)))
+}
+
 /// `[S·R, 5]`: each ray's colour (background included), depth and opacity, style-major.
 pub fn forward(
     sigma: CubeTensor,
@@ -251,22 +271,11 @@ pub fn backward(
     grad: CubeTensor,
 ) -> (CubeTensor, CubeTensor) {
     let [styles, n] = [sigma.meta.shape()[0], sigma.meta.shape()[1]];
-    let units = styles * (offsets.meta.shape()[0] - 1);
-    let zeros = |shape: Vec<usize>| {
-        zeros_client(
-            sigma.client.clone(),
-            sigma.device.clone(),
-            shape.into(),
-            sigma.dtype,
-        )
-    };
-    if units == 0 || n == 0 {
-        return (zeros(vec![styles, n]), zeros(vec![styles, n, 3]));
+    let (units, [grad_sigma, grad_rgb]) =
+        per_sample(&sigma, &offsets, [vec![styles, n], vec![styles, n, 3]]);
+    if units == 0 {
+        return (grad_sigma, grad_rgb);
     }
-    let (grad_sigma, grad_rgb) = (
-        empty_like(&sigma, [styles, n]),
-        empty_like(&sigma, [styles, n, 3]),
-    );
     assert_f32("compositing", &[(&grad, "upstream gradient")]);
     let (client, (count, dim)) = (sigma.client.clone(), grid(&sigma, units));
     let [sigma, rgb, t, delta, offsets, settings] =
@@ -296,13 +305,11 @@ pub fn weights(
     offsets: CubeTensor,
     settings: CubeTensor,
 ) -> CubeTensor {
-    let [styles, n] = [sigma.meta.shape()[0], sigma.meta.shape()[1]];
-    let units = styles * (offsets.meta.shape()[0] - 1);
-    if units == 0 || n == 0 {
-        let (client, device) = (sigma.client.clone(), sigma.device.clone());
-        return zeros_client(client, device, vec![styles, n].into(), sigma.dtype);
+    let shape = sigma.meta.shape().to_vec();
+    let (units, [out]) = per_sample(&sigma, &offsets, [shape]);
+    if units == 0 {
+        return out;
     }
-    let out = empty_like(&sigma, [styles, n]);
     let named = [
         (&sigma, "densities"),
         (&delta, "spacings"),
