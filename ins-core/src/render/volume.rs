@@ -29,11 +29,11 @@ pub struct Composite {
 #[derive(Debug, Clone)]
 enum Weights {
     Computed(Box<Tensor<2>>),
-    /// The op's inputs: the densities `[S, N]`, the lengths and offsets, the settings, and
-    /// the layout the samples came in.
+    /// The op's inputs: the densities `[S, N]`, the lengths and offsets, the settings.
     Later(Box<WalkInputs>),
 }
 
+/// What the op's weights walk reads again, and the shape the weights are given in.
 #[derive(Debug, Clone)]
 struct WalkInputs {
     sigma: Tensor<2>,
