@@ -117,6 +117,19 @@ pub fn composite_ragged(
     background: [f32; 3],
     stop_below: f32,
 ) -> Composite {
+    let shape = sigma.dims();
+    composite_runs(sigma, rgb, spans, background, stop_below, shape)
+}
+
+/// [`composite_ragged`], its weights given in `weights_shape` (the samples' own layout).
+fn composite_runs(
+    sigma: Tensor<2>,
+    rgb: Tensor<3>,
+    spans: RaySpans,
+    background: [f32; 3],
+    stop_below: f32,
+    weights_shape: [usize; 2],
+) -> Composite {
     let rows = sigma.dims()[0] * spans.rays();
     let [r, g, b] = background;
     let settings = Tensor::<1>::from_floats([r, g, b, stop_below], &sigma.device());
@@ -128,7 +141,7 @@ pub fn composite_ragged(
         depth: out.clone().slice([0..rows, 3..4]).reshape([rows]),
         opacity: out.slice([0..rows, 4..5]).reshape([rows]),
         weights: Weights::Later(Box::new(WalkInputs {
-            shape: sigma.dims(),
+            shape: weights_shape,
             sigma: sigma.detach(),
             delta,
             offsets,
@@ -163,17 +176,14 @@ pub fn composite(
         delta: delta.reshape([r * s]),
         offsets: Tensor::from_floats(runs.as_slice(), &sigma.device()),
     };
-    let mut c = composite_ragged(
+    composite_runs(
         sigma.reshape([1, r * s]),
         rgb.reshape([1, r * s, 3]),
         spans,
         background,
         0.0,
-    );
-    if let Weights::Later(walk) = &mut c.weights {
-        walk.shape = [r, s];
-    }
-    c
+        [r, s],
+    )
 }
 
 /// [`composite`] in Burn's ordinary ops (a running sum, exponentials, products, sums), for
