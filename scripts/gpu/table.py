@@ -39,6 +39,7 @@ def main():
         if l.get("backend") in ("wgpu", "cuda"):
             name = l["workload"] + (" (f16)" if l.get("precision") == "f16" else "")
             name += " (channel)" if l.get("device_handle") == "channel" else ""
+            name += " (rows unsplit)" if l.get("split_rows") is False else ""
             ours[(l["backend"], name)] = l
     fmt = lambda v: "–" if v is None else f"{v:.1f}"
     ratio = lambda a, b: "–" if a is None or not b else f"{a / b:.2f}×"

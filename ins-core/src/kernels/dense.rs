@@ -4,7 +4,7 @@
 //! pass: about a tenth of a SIREN step went to `memset` and `memmove`. Here each result is
 //! written once, the bias first and the product accumulated onto it (`super::flex`); the
 //! backward reads the operands through strides instead of transposed copies. Other backends
-//! keep Burn's `Linear` ([`dense`] picks).
+//! take Burn's matmul ([`dense`] picks; a trained layer's rows in blocks, [`dense_blocks`]).
 
 #![allow(deprecated)]
 
@@ -22,6 +22,7 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use crate::kernels::dense_bf16;
+use crate::kernels::dense_blocks::{self, dense_by_row_blocks, row_blocks};
 use crate::kernels::flex::{product, values as slice, written};
 
 /// The dense layer and its gradients as backend operations (`W` in Burn's `[in, out]` layout).
@@ -204,11 +205,16 @@ pub fn dense(layer: &Linear, x: Tensor<2>) -> Tensor<2> {
 }
 
 /// `x [N, I]·w [I, O] + b [O]` for any weight and bias (a part of a layer's, or a bias that
-/// folds in what is constant over the rows): the op on Flex, a matmul elsewhere.
+/// folds in what is constant over the rows): the op on Flex, a matmul elsewhere (by blocks of
+/// rows where the weight is trained: [`dense_blocks`]).
 pub fn dense_with(x: Tensor<2>, w: Tensor<2>, b: Tensor<1>) -> Tensor<2> {
     let flex = matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_));
     if !flex {
-        let o = w.dims()[1];
+        let ([n, i], o) = (x.dims(), w.dims()[1]);
+        let blocks = row_blocks(n, i, o);
+        if blocks > 1 && w.is_tracked() && dense_blocks::applies() {
+            return dense_by_row_blocks(x, w, b, blocks);
+        }
         return x.matmul(w) + b.reshape([1, o]);
     }
     Tensor::from_dispatch(<Dispatch as DenseOps>::dense(

@@ -8,7 +8,8 @@
 //!
 //! - [`flex`]: what the Flex kernels share (a strided GEMM, unzeroed outputs, lanes).
 //! - [`dense`]: the linear layer ([`dense_bf16`]: its products in bf16; [`dense_chain`]: an
-//!   MLP's layers fused for renders); [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
+//!   MLP's layers fused for renders; [`dense_blocks`]: its rows in blocks on the GPU backends,
+//!   so its weight gradient fills the GPU); [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
 //!   activation and its slope; [`gram`]: Gram matrices.
 //! - [`adam`]: Adam's step fused into one pass over each parameter.
 //! - [`cube_launch`]: what the CubeCL kernels' launches share.
@@ -27,6 +28,7 @@ pub mod composite;
 pub mod cube_launch;
 pub mod dense;
 pub mod dense_bf16;
+pub mod dense_blocks;
 pub mod dense_chain;
 pub mod flex;
 pub mod gram;

@@ -116,3 +116,57 @@ fn flex_and_wgpu_agree_on_loss_and_gradients() {
         );
     }
 }
+
+/// A trained layer's product in blocks of rows (`kernels::dense_blocks`, what a GPU runs: the
+/// weight gradient as a batch of partial products, summed) gives on wgpu flex's plain
+/// product's value and input, weight and bias gradients.
+#[test]
+fn a_trained_layer_in_blocks_of_rows_on_wgpu_matches_flex() {
+    use ins_core::kernels::dense::dense_with;
+    use ins_core::kernels::dense_blocks::{dense_by_row_blocks, row_blocks};
+    let _f32 = ins_core::kernels::dense_bf16::forbid();
+    let (n, i, o) = (4_096usize, 27usize, 45usize);
+    let blocks = row_blocks(n, i, o);
+    assert_eq!(blocks, 16);
+    let wave =
+        |len: usize, k: f32| -> Vec<f32> { (0..len).map(|j| (j as f32 * k).sin()).collect() };
+    let (x, w, b, probe) = (
+        wave(n * i, 0.37),
+        wave(i * o, 1.3),
+        wave(o, 2.1),
+        wave(n * o, 0.11),
+    );
+    let run = move |device: Device, blocks: usize| -> Vec<Vec<f32>> {
+        let t = |v: &[f32], shape: [usize; 2]| Tensor::<1>::from_floats(v, &device).reshape(shape);
+        let x = t(&x, [n, i]).require_grad();
+        let w = t(&w, [i, o]).require_grad();
+        let b = Tensor::<1>::from_floats(b.as_slice(), &device).require_grad();
+        let y = match blocks {
+            1 => dense_with(x.clone(), w.clone(), b.clone()),
+            _ => dense_by_row_blocks(x.clone(), w.clone(), b.clone(), blocks),
+        };
+        let grads = (y.clone() * t(&probe, [n, o])).sum().backward();
+        vec![
+            values(y),
+            values(x.grad(&grads).expect("input gradient")),
+            values(w.grad(&grads).expect("weight gradient")),
+            values(b.grad(&grads).expect("bias gradient")),
+        ]
+    };
+    let flex = run(Device::flex().autodiff(), 1);
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "a layer in blocks", move || {
+        run(BackendChoice::Wgpu.device().autodiff(), blocks)
+    });
+    for (k, what) in [
+        "value",
+        "input gradient",
+        "weight gradient",
+        "bias gradient",
+    ]
+    .iter()
+    .enumerate()
+    {
+        let err = max_rel_diff(&wgpu[k], &flex[k], 1e-6);
+        assert!(err < 1e-4, "{what}: {err:e} relative to the largest");
+    }
+}
