@@ -10,8 +10,8 @@
 //! product written as a batch of `B` blocks of rows against one broadcast weight,
 //! `[B, N/B, I]·[1, I, O]`: Burn's autodiff then computes the weight gradient as `B` products
 //! `[I, N/B]·[N/B, O]` at once (`B` times the cubes) and sums them over the batch (a small
-//! reduction of `B·I·O` values), and the bias gradient likewise in two short sums. Values and
-//! gradients are the same sums, grouped differently. Flex keeps its own op (`dense`).
+//! reduction of `B·I·O` values). The bias is added to the rows as before. Values and gradients
+//! are the same sums, grouped differently. Flex keeps its own op (`dense`).
 
 use burn::prelude::*;
 
@@ -54,9 +54,9 @@ pub fn applies() -> bool {
     asked && crate::gpu::prepared().is_none_or(|r| r.adapter.kind == AdapterKind::Hardware)
 }
 
-/// `x [N, I]·w [I, O] + b [O]` as `blocks` blocks of `N / blocks` rows against the one
-/// broadcast weight and bias (see the module's doc): the same value as the plain product, its
-/// weight and bias gradients summed block by block.
+/// `x [N, I]·w [I, O] + b [O]`, the product as `blocks` blocks of `N / blocks` rows against the
+/// one broadcast weight (see the module's doc): the same value as the plain product, its weight
+/// gradient summed block by block.
 ///
 /// # Panics
 /// Unless `blocks` divides `N`.
@@ -67,8 +67,8 @@ pub fn dense_by_row_blocks(x: Tensor<2>, w: Tensor<2>, b: Tensor<1>, blocks: usi
     let y = x
         .reshape([blocks, n / blocks, i])
         .matmul(w.unsqueeze::<3>())
-        + b.reshape([1, 1, o]);
-    y.reshape([n, o])
+        .reshape([n, o]);
+    y + b.reshape([1, o])
 }
 
 #[cfg(test)]
