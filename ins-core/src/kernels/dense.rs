@@ -22,7 +22,7 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use crate::kernels::dense_bf16;
-use crate::kernels::dense_blocks::{self, dense_by_row_blocks, row_blocks};
+use crate::kernels::dense_blocks::trained_product;
 use crate::kernels::flex::{product, values as slice, written};
 
 /// The dense layer and its gradients as backend operations (`W` in Burn's `[in, out]` layout).
@@ -210,12 +210,8 @@ pub fn dense(layer: &Linear, x: Tensor<2>) -> Tensor<2> {
 pub fn dense_with(x: Tensor<2>, w: Tensor<2>, b: Tensor<1>) -> Tensor<2> {
     let flex = matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_));
     if !flex {
-        let ([n, i], o) = (x.dims(), w.dims()[1]);
-        let blocks = row_blocks(n, i, o);
-        if blocks > 1 && w.is_tracked() && dense_blocks::applies() {
-            return dense_by_row_blocks(x, w, b, blocks);
-        }
-        return x.matmul(w) + b.reshape([1, o]);
+        let o = w.dims()[1];
+        return trained_product(x, w) + b.reshape([1, o]);
     }
     Tensor::from_dispatch(<Dispatch as DenseOps>::dense(
         x.into_dispatch(),

@@ -54,21 +54,36 @@ pub fn applies() -> bool {
     asked && crate::gpu::prepared().is_none_or(|r| r.adapter.kind == AdapterKind::Hardware)
 }
 
-/// `x [N, I]·w [I, O] + b [O]`, the product as `blocks` blocks of `N / blocks` rows against the
-/// one broadcast weight (see the module's doc): the same value as the plain product, its weight
-/// gradient summed block by block.
+/// `x [N, I]·w [I, O]`: by [`row_blocks`] where `w` is trained on a GPU ([`applies`]), else
+/// the plain product (Flex, a frozen weight, rows too few or odd to split).
+pub fn trained_product(x: Tensor<2>, w: Tensor<2>) -> Tensor<2> {
+    let ([n, i], o) = (x.dims(), w.dims()[1]);
+    let blocks = row_blocks(n, i, o);
+    if blocks > 1 && w.is_tracked() && !is_flex(&x) && applies() {
+        return product_in_blocks(x, w, blocks);
+    }
+    x.matmul(w)
+}
+
+fn is_flex(x: &Tensor<2>) -> bool {
+    matches!(
+        x.device().inner().as_dispatch(),
+        burn::backend::DispatchDevice::Flex(_)
+    )
+}
+
+/// `x [N, I]·w [I, O]` as `blocks` blocks of `N / blocks` rows against the one broadcast weight
+/// (see the module's doc): the plain product's value, its weight gradient summed block by block.
 ///
 /// # Panics
 /// Unless `blocks` divides `N`.
-pub fn dense_by_row_blocks(x: Tensor<2>, w: Tensor<2>, b: Tensor<1>, blocks: usize) -> Tensor<2> {
+pub fn product_in_blocks(x: Tensor<2>, w: Tensor<2>, blocks: usize) -> Tensor<2> {
     let [n, i] = x.dims();
     let o = w.dims()[1];
     assert!(blocks > 0 && n % blocks == 0, "{blocks} blocks of {n} rows");
-    let y = x
-        .reshape([blocks, n / blocks, i])
+    x.reshape([blocks, n / blocks, i])
         .matmul(w.unsqueeze::<3>())
-        .reshape([n, o]);
-    y + b.reshape([1, o])
+        .reshape([n, o])
 }
 
 #[cfg(test)]
@@ -113,11 +128,11 @@ mod tests {
                 w.clone().require_grad(),
                 b.clone().require_grad(),
             );
-            let y = if blocks == 0 {
-                x.clone().matmul(w.clone()) + b.clone().reshape([1, o])
-            } else {
-                dense_by_row_blocks(x.clone(), w.clone(), b.clone(), blocks)
+            let product = match blocks {
+                0 => x.clone().matmul(w.clone()),
+                _ => product_in_blocks(x.clone(), w.clone(), blocks),
             };
+            let y = product + b.clone().reshape([1, o]);
             let g = (y.clone() * probe.clone()).sum().backward();
             let flat = |t: Tensor<2>| t.into_data().to_vec::<f32>().unwrap();
             [

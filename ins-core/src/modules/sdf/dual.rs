@@ -6,6 +6,7 @@ use burn::prelude::*;
 
 use super::BETA;
 use crate::kernels::dense::dense;
+use crate::kernels::dense_blocks::trained_product;
 use crate::kernels::softplus::{softplus, softplus_slope};
 use crate::modules::encoding::{FourierEncoding, angles, octave_pairs};
 
@@ -21,7 +22,7 @@ impl Dual {
         let w = l.weight.val();
         Self {
             h: dense(l, self.h),
-            t: self.t.matmul(w),
+            t: trained_product(self.t, w),
         }
     }
 
@@ -33,7 +34,7 @@ impl Dual {
         let [d_in, _] = w.dims();
         Self {
             h: dense(l, self.h),
-            t: self.t.matmul(w.slice([0..d_in, 0..1])),
+            t: trained_product(self.t, w.slice([0..d_in, 0..1])),
         }
     }
 
