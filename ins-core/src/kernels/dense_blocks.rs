@@ -134,12 +134,12 @@ mod tests {
             };
             let y = product + b.clone().reshape([1, o]);
             let g = (y.clone() * probe.clone()).sum().backward();
-            let flat = |t: Tensor<2>| t.into_data().to_vec::<f32>().unwrap();
+            let flat = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
             [
                 flat(y.inner()),
                 flat(x.grad(&g).unwrap()),
                 flat(w.grad(&g).unwrap()),
-                b.grad(&g).unwrap().into_data().to_vec::<f32>().unwrap(),
+                b.grad(&g).unwrap().into_data().try_to_vec::<f32>().unwrap(),
             ]
         };
         let plain = run(0);
