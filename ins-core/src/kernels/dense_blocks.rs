@@ -16,6 +16,7 @@
 use burn::prelude::*;
 
 use crate::gpu::AdapterKind;
+use crate::shape_buckets::compiles_per_size;
 
 /// The output tile a cube computes, for counting cubes (CubeCL's tensor-core stages are 32 to
 /// 128 wide; 64 is their middle).
@@ -59,17 +60,10 @@ pub fn applies() -> bool {
 pub fn trained_product(x: Tensor<2>, w: Tensor<2>) -> Tensor<2> {
     let ([n, i], o) = (x.dims(), w.dims()[1]);
     let blocks = row_blocks(n, i, o);
-    if blocks > 1 && w.is_tracked() && !is_flex(&x) && applies() {
+    if blocks > 1 && w.is_tracked() && compiles_per_size(&x.device()) && applies() {
         return product_in_blocks(x, w, blocks);
     }
     x.matmul(w)
-}
-
-fn is_flex(x: &Tensor<2>) -> bool {
-    matches!(
-        x.device().inner().as_dispatch(),
-        burn::backend::DispatchDevice::Flex(_)
-    )
 }
 
 /// `x [N, I]·w [I, O]` as `blocks` blocks of `N / blocks` rows against the one broadcast weight
