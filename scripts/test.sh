@@ -17,6 +17,11 @@ export CUBECL_AUTOTUNE_LEVEL="${CUBECL_AUTOTUNE_LEVEL:-minimal}"
 # optimisation passes a cold `backends` took 261 s instead of 300 (Intel Xeon, 2 cores). The
 # tests' kernels run on a few hundred values, where slower shader code costs nothing.
 export GALLIVM_PERF="${GALLIVM_PERF:-nopt}"
+# ...and most of what it compiles were CubeCL's tiled matmuls (50-250 KB of WGSL each, five
+# candidates a size under tuning): each set's first candidate instead, nothing tuned (patched
+# into third_party/cubecl-runtime-0.11.3). The tests compare our ops with flex; which matmul
+# routine runs is CubeCL's choice, tuned on a GPU (scripts/gpu/check.sh).
+export CUBECL_AUTOTUNE_FALLBACK="${CUBECL_AUTOTUNE_FALLBACK:-1}"
 if [ $# -eq 0 ] || [ "$1" = "--" ]; then
   python3 scripts/run_tests.py "$@"
 else

@@ -57,3 +57,24 @@ fn load_autotune_level() -> u32 {
         autotune_level as u32
     }
 }
+
+/// Unknown (-1), off (0) or on (1).
+static FALLBACK_ONLY: AtomicI32 = AtomicI32::new(-1);
+
+/// Whether tuning is skipped (`CUBECL_AUTOTUNE_FALLBACK=1`, patched in): each tunable set runs
+/// its candidates in their listed order and keeps the first that succeeds, the fallback every
+/// set lists first, with nothing measured or cached. For a software adapter that compiles each
+/// candidate on the CPU, where tuning costs minutes and its choice tells nothing.
+pub fn fallback_only() -> bool {
+    match FALLBACK_ONLY.load(Ordering::Relaxed) {
+        -1 => {
+            #[cfg(feature = "std")]
+            let on = std::env::var("CUBECL_AUTOTUNE_FALLBACK").is_ok_and(|v| v == "1");
+            #[cfg(not(feature = "std"))]
+            let on = false;
+            FALLBACK_ONLY.store(on as i32, Ordering::Relaxed);
+            on
+        }
+        v => v == 1,
+    }
+}
