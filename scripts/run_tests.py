@@ -35,11 +35,11 @@ import threading
 import time
 
 # The test modules (or programs) that run wgpu on Mesa's lavapipe, in the order their lane runs
-# them. Most of their time is lavapipe compiling kernels, on one thread per process (CubeCL's
-# device thread), and CubeCL tuning each matmul size once per machine (its cache on disk), which
-# compiles five candidates for each. The step comparisons first: they tune the NeRF and IDR
-# sizes the CLI's runs then find decided (with Mesa's disk cache warm, one IDR step on wgpu
-# took 164 s against 514 s cold, AMD EPYC Zen 3). Each module keeps a process of its own, so
+# them. Lavapipe compiles each kernel on the CPU, and Mesa keeps them on disk: the step
+# comparisons first, whose kernels the CLI's runs then find compiled (with Mesa's disk cache
+# warm, one IDR step on wgpu took 164 s against 514 s cold, AMD EPYC Zen 3, when tuning still
+# compiled five tiled matmuls a size; scripts/test.sh now turns tuning off, and wgpu_steps took
+# 64 s cold instead of 700, fifty-eighth session). Each module keeps a process of its own, so
 # that the CPU lane, once its own jobs are done, compiles the next one on the other core (the
 # four library modules in one process took 2401 s there, on one core).
 LAVAPIPE = ["wgpu_steps", "wgpu_render_ops", "backends", "vgg_import", "hash_grid", "wgpu_cli"]
