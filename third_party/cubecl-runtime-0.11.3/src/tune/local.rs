@@ -178,12 +178,7 @@ where
         Id: Send + Sync,
     {
         if super::util::fallback_only() {
-            for i in 0..operations.len() {
-                if let Ok(output) = operations.fastest(i).execute(inputs.clone()) {
-                    return output;
-                }
-            }
-            panic!("All autotune operations failed, no viable operation found.");
+            return first_that_runs(&operations, inputs);
         }
 
         let key = operations.generate_key(&inputs);
@@ -238,13 +233,25 @@ where
             }
             TuneCacheResult::Pending => {
                 // Still waiting (e.g. on wasm). Try all operations as a fallback.
-                for i in 0..operations.len() {
-                    if let Ok(output) = operations.fastest(i).execute(inputs.clone()) {
-                        return output;
-                    }
-                }
-                panic!("All autotune operations failed, no viable operation found.");
+                first_that_runs(&operations, inputs)
             }
         }
     }
+}
+
+/// The output of the first operation in `operations`, in their listed order, that runs on
+/// `inputs` (patched in: untuned, as `execute` runs them while tuning is pending or skipped).
+fn first_that_runs<'a, AK: AutotuneKey, I: TuneInputs, Out, Id>(
+    operations: &TunableSet<AK, I, Out, Id>,
+    inputs: <I as TuneInputs>::At<'a>,
+) -> Out
+where
+    <I as TuneInputs>::At<'a>: Clone,
+{
+    for i in 0..operations.len() {
+        if let Ok(output) = operations.fastest(i).execute(inputs.clone()) {
+            return output;
+        }
+    }
+    panic!("All autotune operations failed, no viable operation found.");
 }
