@@ -22,7 +22,7 @@ use burn::nn::Linear;
 use burn::prelude::*;
 
 use crate::kernels::dense_bf16;
-use crate::kernels::dense_blocks::trained_product;
+use crate::kernels::dense_blocks::trained_affine;
 use crate::kernels::flex::{product, values as slice, written};
 
 /// The dense layer and its gradients as backend operations (`W` in Burn's `[in, out]` layout).
@@ -210,8 +210,7 @@ pub fn dense(layer: &Linear, x: Tensor<2>) -> Tensor<2> {
 pub fn dense_with(x: Tensor<2>, w: Tensor<2>, b: Tensor<1>) -> Tensor<2> {
     let flex = matches!(x.device().inner().as_dispatch(), DispatchDevice::Flex(_));
     if !flex {
-        let o = w.dims()[1];
-        return trained_product(x, w) + b.reshape([1, o]);
+        return trained_affine(x, w, Some(b));
     }
     Tensor::from_dispatch(<Dispatch as DenseOps>::dense(
         x.into_dispatch(),

@@ -10,8 +10,12 @@
 //! product written as a batch of `B` blocks of rows against one broadcast weight,
 //! `[B, N/B, I]·[1, I, O]`: Burn's autodiff then computes the weight gradient as `B` products
 //! `[I, N/B]·[N/B, O]` at once (`B` times the cubes) and sums them over the batch (a small
-//! reduction of `B·I·O` values). The bias is added to the rows as before. Values and gradients
-//! are the same sums, grouped differently. Flex keeps its own op (`dense`).
+//! reduction of `B·I·O` values). The bias is added block by block too, so its gradient, a sum
+//! over all `N` rows of each of `O` outputs, is taken in two steps: over each block's rows
+//! (`B·O` sums at once), then over the blocks. Burn reduces a broadcast bias over all its
+//! rows in one reduction, and CubeCL's reductions give each output (four, vectorised) to one
+//! unit, plane or cube: `O / 4` of them for a whole layer, 16 for a 64-wide one. Values and
+//! gradients are the same sums, grouped differently. Flex keeps its own op (`dense`).
 
 use burn::prelude::*;
 
@@ -55,29 +59,56 @@ pub fn applies() -> bool {
     asked && crate::gpu::prepared().is_none_or(|r| r.adapter.kind == AdapterKind::Hardware)
 }
 
-/// `x [N, I]·w [I, O]`: by [`row_blocks`] where `w` is trained on a GPU ([`applies`]), else
-/// the plain product (Flex, a frozen weight, rows too few or odd to split).
+/// `x [N, I]·w [I, O]`, for a layer's forward-mode tangents (no bias): see [`trained_affine`].
 pub fn trained_product(x: Tensor<2>, w: Tensor<2>) -> Tensor<2> {
-    let ([n, i], o) = (x.dims(), w.dims()[1]);
-    let blocks = row_blocks(n, i, o);
-    if blocks > 1 && w.is_tracked() && compiles_per_size(&x.device()) && applies() {
-        return product_in_blocks(x, w, blocks);
-    }
-    x.matmul(w)
+    trained_affine(x, w, None)
 }
 
-/// `x [N, I]·w [I, O]` as `blocks` blocks of `N / blocks` rows against the one broadcast weight
-/// (see the module's doc): the plain product's value, its weight gradient summed block by block.
+/// `x [N, I]·w [I, O] + b [O]`: by [`row_blocks`] where `w` or `b` is trained on a GPU
+/// ([`applies`]), else the plain product and a broadcast bias (Flex, frozen parameters, rows
+/// too few or odd to split).
+pub fn trained_affine(x: Tensor<2>, w: Tensor<2>, b: Option<Tensor<1>>) -> Tensor<2> {
+    let ([n, i], o) = (x.dims(), w.dims()[1]);
+    let blocks = row_blocks(n, i, o);
+    let trained = w.is_tracked() || b.as_ref().is_some_and(|b| b.is_tracked());
+    if blocks > 1 && trained && compiles_per_size(&x.device()) && applies() {
+        return affine_in_blocks(x, w, b, blocks);
+    }
+    let y = x.matmul(w);
+    match b {
+        Some(b) => y + b.reshape([1, o]),
+        None => y,
+    }
+}
+
+/// `x [N, I]·w [I, O] + b [O]` as `blocks` blocks of `N / blocks` rows against the one
+/// broadcast weight (see the module's doc): the plain layer's value, its weight gradient summed
+/// block by block. The bias reaches the rows in two broadcasts, `[1, 1, O] → [B, 1, O] →
+/// [B, N/B, O]`, whose backward passes sum in that order reversed: each block's rows first
+/// (`B·O` outputs, sums of `N/B`), then the `B` partial sums.
 ///
 /// # Panics
 /// Unless `blocks` divides `N`.
-pub fn product_in_blocks(x: Tensor<2>, w: Tensor<2>, blocks: usize) -> Tensor<2> {
+pub fn affine_in_blocks(
+    x: Tensor<2>,
+    w: Tensor<2>,
+    b: Option<Tensor<1>>,
+    blocks: usize,
+) -> Tensor<2> {
     let [n, i] = x.dims();
     let o = w.dims()[1];
     assert!(blocks > 0 && n % blocks == 0, "{blocks} blocks of {n} rows");
-    x.reshape([blocks, n / blocks, i])
-        .matmul(w.unsqueeze::<3>())
-        .reshape([n, o])
+    let rows = n / blocks;
+    // The bias a block, `[B, 1, O]`, made by a broadcast add: Burn's fusion fuses no `expand`,
+    // and an expanded bias kept its add to the rows out of the fused kernels (a pass over the
+    // layer's output more; on the CUDA stand-in, an unfused add a layer).
+    let b = b.map(|b| Tensor::zeros([blocks, 1, o], &b.device()) + b.reshape([1, 1, o]));
+    let y = x.reshape([blocks, rows, i]).matmul(w.unsqueeze::<3>());
+    match b {
+        Some(b) => y + b,
+        None => y,
+    }
+    .reshape([n, o])
 }
 
 #[cfg(test)]
@@ -122,11 +153,10 @@ mod tests {
                 w.clone().require_grad(),
                 b.clone().require_grad(),
             );
-            let product = match blocks {
-                0 => x.clone().matmul(w.clone()),
-                _ => product_in_blocks(x.clone(), w.clone(), blocks),
+            let y = match blocks {
+                0 => x.clone().matmul(w.clone()) + b.clone().reshape([1, o]),
+                _ => affine_in_blocks(x.clone(), w.clone(), Some(b.clone()), blocks),
             };
-            let y = product + b.clone().reshape([1, o]);
             let g = (y.clone() * probe.clone()).sum().backward();
             let flat = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
             [

@@ -123,7 +123,7 @@ fn flex_and_wgpu_agree_on_loss_and_gradients() {
 #[test]
 fn a_trained_layer_in_blocks_of_rows_on_wgpu_matches_flex() {
     use ins_core::kernels::dense::dense_with;
-    use ins_core::kernels::dense_blocks::{product_in_blocks, row_blocks};
+    use ins_core::kernels::dense_blocks::{affine_in_blocks, row_blocks};
     let _f32 = ins_core::kernels::dense_bf16::forbid();
     let (n, i, o) = (4_096usize, 27usize, 45usize);
     let blocks = row_blocks(n, i, o);
@@ -143,7 +143,7 @@ fn a_trained_layer_in_blocks_of_rows_on_wgpu_matches_flex() {
         let b = Tensor::<1>::from_floats(b.as_slice(), &device).require_grad();
         let y = match blocks {
             1 => dense_with(x.clone(), w.clone(), b.clone()),
-            _ => product_in_blocks(x.clone(), w.clone(), blocks) + b.clone().reshape([1, o]),
+            _ => affine_in_blocks(x.clone(), w.clone(), Some(b.clone()), blocks),
         };
         let grads = (y.clone() * t(&probe, [n, o])).sum().backward();
         vec![
