@@ -83,9 +83,9 @@ pub fn trained_affine(x: Tensor<2>, w: Tensor<2>, b: Option<Tensor<1>>) -> Tenso
 
 /// `x [N, I]·w [I, O] + b [O]` as `blocks` blocks of `N / blocks` rows against the one
 /// broadcast weight (see the module's doc): the plain layer's value, its weight gradient summed
-/// block by block. The bias reaches the rows in two broadcasts, `[1, 1, O] → [B, 1, O] →
-/// [B, N/B, O]`, whose backward passes sum in that order reversed: each block's rows first
-/// (`B·O` outputs, sums of `N/B`), then the `B` partial sums.
+/// block by block. The bias reaches the rows in two steps, `[1, 1, O] → [B, 1, O]` (expanded)
+/// `→ [B, N/B, O]` (broadcast), whose backward passes sum in that order reversed: each block's
+/// rows first (`B·O` outputs, sums of `N/B`), then the `B` partial sums.
 ///
 /// # Panics
 /// Unless `blocks` divides `N`.
@@ -99,10 +99,11 @@ pub fn affine_in_blocks(
     let o = w.dims()[1];
     assert!(blocks > 0 && n % blocks == 0, "{blocks} blocks of {n} rows");
     let rows = n / blocks;
-    // The bias a block, `[B, 1, O]`, made by a broadcast add: Burn's fusion fuses no `expand`,
-    // and an expanded bias kept its add to the rows out of the fused kernels (a pass over the
-    // layer's output more; on the CUDA stand-in, an unfused add a layer).
-    let b = b.map(|b| Tensor::zeros([blocks, 1, o], &b.device()) + b.reshape([1, 1, o]));
+    // The bias a block, `[B, 1, O]`, as the result of an op (`+ 0`) on its expanded view: added
+    // to the rows, the view itself kept that add out of Burn's fused kernels (a pass over the
+    // layer's output more, an unfused add a layer on the CUDA stand-in); `zeros + b` fused
+    // neither of its two small kernels. This one fuses.
+    let b = b.map(|b| b.reshape([1, 1, o]).expand([blocks, 1, o]).add_scalar(0.0));
     let y = x.reshape([blocks, rows, i]).matmul(w.unsqueeze::<3>());
     match b {
         Some(b) => y + b,

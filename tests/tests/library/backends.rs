@@ -117,17 +117,24 @@ fn flex_and_wgpu_agree_on_loss_and_gradients() {
     }
 }
 
-/// A trained layer's product in blocks of rows (`kernels::dense_blocks`, what a GPU runs: the
-/// weight gradient as a batch of partial products, summed) gives on wgpu flex's plain
-/// product's value and input, weight and bias gradients.
+/// A trained layer in blocks of rows (`kernels::dense_blocks`, what a GPU runs: the weight
+/// gradient as a batch of partial products, summed; the bias added a block, its gradient summed
+/// over each block's rows, then over the blocks) gives on wgpu (with Burn's fusion) flex's plain
+/// layer's value and input, weight and bias gradients: at odd widths, and at widths of four
+/// whose kernels read four values at a time, as the program's layers do.
 #[test]
 fn a_trained_layer_in_blocks_of_rows_on_wgpu_matches_flex() {
+    for (n, i, o) in [(4_096usize, 27usize, 45usize), (4_096, 32, 64)] {
+        let blocks = ins_core::kernels::dense_blocks::row_blocks(n, i, o);
+        assert_eq!(blocks, 16);
+        layer_in_blocks_matches_flex(n, i, o, blocks);
+    }
+}
+
+fn layer_in_blocks_matches_flex(n: usize, i: usize, o: usize, blocks: usize) {
     use ins_core::kernels::dense::dense_with;
-    use ins_core::kernels::dense_blocks::{affine_in_blocks, row_blocks};
+    use ins_core::kernels::dense_blocks::affine_in_blocks;
     let _f32 = ins_core::kernels::dense_bf16::forbid();
-    let (n, i, o) = (4_096usize, 27usize, 45usize);
-    let blocks = row_blocks(n, i, o);
-    assert_eq!(blocks, 16);
     let wave =
         |len: usize, k: f32| -> Vec<f32> { (0..len).map(|j| (j as f32 * k).sin()).collect() };
     let (x, w, b, probe) = (
@@ -167,6 +174,9 @@ fn a_trained_layer_in_blocks_of_rows_on_wgpu_matches_flex() {
     .enumerate()
     {
         let err = max_rel_diff(&wgpu[k], &flex[k], 1e-6);
-        assert!(err < 1e-4, "{what}: {err:e} relative to the largest");
+        assert!(
+            err < 1e-4,
+            "{n}×{i}→{o}, {what}: {err:e} relative to the largest"
+        );
     }
 }
