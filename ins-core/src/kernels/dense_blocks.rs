@@ -41,7 +41,7 @@ pub fn row_blocks(n: usize, i: usize, o: usize) -> usize {
     let mut blocks = 1;
     while blocks < MAX_BLOCKS
         && blocks * tiles < CUBES
-        && n % (2 * blocks) == 0
+        && n.is_multiple_of(2 * blocks)
         && n / (2 * blocks) >= MIN_ROWS
     {
         blocks *= 2;
@@ -97,7 +97,10 @@ pub fn affine_in_blocks(
 ) -> Tensor<2> {
     let [n, i] = x.dims();
     let o = w.dims()[1];
-    assert!(blocks > 0 && n % blocks == 0, "{blocks} blocks of {n} rows");
+    assert!(
+        blocks > 0 && n.is_multiple_of(blocks),
+        "{blocks} blocks of {n} rows"
+    );
     let rows = n / blocks;
     // The bias a block, `[B, 1, O]`, as the result of an op (`+ 0`) on its expanded view: added
     // to the rows, the view itself kept that add out of Burn's fused kernels (a pass over the
@@ -110,6 +113,20 @@ pub fn affine_in_blocks(
         None => y,
     }
     .reshape([n, o])
+}
+
+/// Asserts each of `got` within 1e-5 of the same output of `want` (relative to that output's
+/// largest entry): the blocked sums against the plain ones, in tests.
+#[cfg(test)]
+pub(crate) fn assert_all_close(want: &[Vec<f32>], got: &[Vec<f32>], what: &str) {
+    for (k, (want, got)) in want.iter().zip(got).enumerate() {
+        let scale = want.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+        let err = want
+            .iter()
+            .zip(got)
+            .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(err <= 1e-5 * scale, "output {k}, {what}: {err}");
+    }
 }
 
 #[cfg(test)]
@@ -170,14 +187,7 @@ mod tests {
         let plain = run(0);
         // Value, then the input's, the weight's and the bias's gradients.
         for blocks in [1, 4, 64] {
-            for (k, (want, got)) in plain.iter().zip(run(blocks)).enumerate() {
-                let scale = want.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
-                let err = want
-                    .iter()
-                    .zip(&got)
-                    .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
-                assert!(err <= 1e-5 * scale, "output {k}, {blocks} blocks: {err}");
-            }
+            assert_all_close(&plain, &run(blocks), &format!("{blocks} blocks"));
         }
     }
 }

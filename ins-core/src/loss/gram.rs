@@ -6,10 +6,11 @@ use burn::backend::DispatchDevice;
 use burn::prelude::*;
 use vgg_import::{Vgg, VggFeatures};
 
+use crate::kernels::dense_blocks::{self, row_blocks};
 use crate::kernels::gram::gram_flex;
 
 /// `[B, C, H, W] → [B, C, C]`, `G = F Fᵀ / (C·H·W)`: one op with its own backward on Flex,
-/// tensor ops elsewhere.
+/// tensor ops elsewhere: on a GPU the sum over the pixels in blocks ([`gram_in_blocks`]).
 pub fn gram(features: Tensor<4>) -> Tensor<3> {
     let [b, c, h, w] = features.dims();
     let f = features.reshape([b, c, h * w]);
@@ -17,7 +18,32 @@ pub fn gram(features: Tensor<4>) -> Tensor<3> {
     if matches!(f.device().inner().as_dispatch(), DispatchDevice::Flex(_)) {
         return gram_flex(f, scale);
     }
+    let blocks = row_blocks(h * w, c, c);
+    if blocks > 1 && dense_blocks::applies() {
+        return gram_in_blocks(f, blocks).mul_scalar(scale);
+    }
     f.clone().matmul(f.swap_dims(1, 2)).mul_scalar(scale)
+}
+
+/// `F Fᵀ` for `f [B, C, K]`, the sum over `K` taken as `blocks` partial products at once, then
+/// summed. Why: `F Fᵀ` is a product with a small output (`C × C`, 64 × 64 at relu1_2) and a long
+/// sum (every pixel), which CubeCL's matmuls give to as many cubes as the output has tiles (one
+/// to four at relu1_2) and walk whole in each (see [`dense_blocks`]): the batch of blocks
+/// `[B, blocks, C, K/blocks]` multiplies the cubes. The same sums, grouped differently.
+///
+/// # Panics
+/// Unless `blocks` divides `K`.
+pub fn gram_in_blocks(f: Tensor<3>, blocks: usize) -> Tensor<3> {
+    let [b, c, k] = f.dims();
+    assert!(
+        blocks > 0 && k % blocks == 0,
+        "{blocks} blocks of {k} pixels"
+    );
+    let f = f.reshape([b, c, blocks, k / blocks]).swap_dims(1, 2);
+    f.clone()
+        .matmul(f.swap_dims(2, 3))
+        .sum_dim(1)
+        .reshape([b, c, c])
 }
 
 /// Gram matrices of a style image at the four style layers, each `[1, C, C]`.
@@ -93,4 +119,35 @@ pub fn style_distances(features: &VggFeatures, targets: &[Tensor<3>; 4]) -> [f32
 /// image is from a painting's style, by the definition training minimises.
 pub fn style_distance(vgg: &Vgg, rgb: Tensor<4>, targets: &[Tensor<3>; 4]) -> f64 {
     style_loss(&vgg.features(rgb), targets).into_scalar::<f32>() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernels::dense_blocks::assert_all_close;
+    use burn::tensor::Distribution;
+
+    /// The Gram matrix in blocks of pixels has the plain product's value and gradient (flex,
+    /// autodiff), for a batch of two and blocks of several sizes.
+    #[test]
+    fn the_gram_in_blocks_is_the_plain_products_value_and_gradient() {
+        let d = Device::flex().autodiff();
+        d.seed(3);
+        let f = Tensor::<3>::random([2, 5, 1_024], Distribution::Default, &d);
+        let probe = Tensor::<3>::random([2, 5, 5], Distribution::Default, &d);
+        let run = |blocks: usize| {
+            let f = f.clone().require_grad();
+            let g = match blocks {
+                1 => f.clone().matmul(f.clone().swap_dims(1, 2)),
+                _ => gram_in_blocks(f.clone(), blocks),
+            };
+            let grads = (g.clone() * probe.clone()).sum().backward();
+            let flat = |t: Tensor<3>| t.into_data().try_to_vec::<f32>().unwrap();
+            [flat(g.inner()), flat(f.grad(&grads).unwrap())]
+        };
+        let plain = run(1);
+        for blocks in [2, 16, 256] {
+            assert_all_close(&plain, &run(blocks), &format!("{blocks} blocks"));
+        }
+    }
 }

@@ -131,6 +131,42 @@ fn a_trained_layer_in_blocks_of_rows_on_wgpu_matches_flex() {
     }
 }
 
+/// A Gram matrix summed in blocks of pixels (`loss::gram::gram_in_blocks`, what a GPU runs) gives
+/// on wgpu flex's Gram matrix and its gradient, at relu1_2's 64 channels.
+#[test]
+fn a_gram_matrix_in_blocks_of_pixels_on_wgpu_matches_flex() {
+    use ins_core::loss::gram::{gram, gram_in_blocks};
+    let (c, h, w) = (64usize, 32usize, 64usize);
+    let blocks = ins_core::kernels::dense_blocks::row_blocks(h * w, c, c);
+    assert_eq!(blocks, 8);
+    let wave =
+        |len: usize, k: f32| -> Vec<f32> { (0..len).map(|j| (j as f32 * k).sin()).collect() };
+    let (f, probe) = (wave(c * h * w, 0.37), wave(c * c, 1.3));
+    let run = move |device: Device, blocks: usize| -> Vec<Vec<f32>> {
+        let f = Tensor::<1>::from_floats(f.as_slice(), &device)
+            .reshape([1, c, h, w])
+            .require_grad();
+        let g = match blocks {
+            1 => gram(f.clone()),
+            _ => gram_in_blocks(f.clone().reshape([1, c, h * w]), blocks)
+                .mul_scalar(1.0 / (c * h * w) as f32),
+        };
+        let probe = Tensor::<1>::from_floats(probe.as_slice(), &device).reshape([1, c, c]);
+        let grads = (g.clone() * probe).sum().backward();
+        vec![values(g), values(f.grad(&grads).expect("feature gradient"))]
+    };
+    let flex = run(Device::flex().autodiff(), 1);
+    let wgpu = ins_tests::within(
+        ins_tests::WGPU_LIMIT_S,
+        "a Gram matrix in blocks",
+        move || run(BackendChoice::Wgpu.device().autodiff(), blocks),
+    );
+    for (k, what) in ["value", "feature gradient"].iter().enumerate() {
+        let err = max_rel_diff(&wgpu[k], &flex[k], 1e-6);
+        assert!(err < 1e-4, "{what}: {err:e} relative to the largest");
+    }
+}
+
 fn layer_in_blocks_matches_flex(n: usize, i: usize, o: usize, blocks: usize) {
     use ins_core::kernels::dense::dense_with;
     use ins_core::kernels::dense_blocks::affine_in_blocks;
