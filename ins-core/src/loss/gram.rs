@@ -9,6 +9,12 @@ use vgg_import::{Vgg, VggFeatures};
 use crate::kernels::dense_blocks::{self, row_blocks};
 use crate::kernels::gram::gram_flex;
 
+/// The shortest sum over pixels a GPU takes in blocks: one 64 × 64 tile of `F Fᵀ` walking
+/// 16,384 pixels is about 67 M multiply-adds on one multiprocessor, a few tenths of a
+/// millisecond; the blocks cost about eight launches more (their copies, the sum over blocks),
+/// on the CUDA stand-in about as much host time. relu1_2 from 128² up, relu2_2 from 256².
+const LONG_SUM: usize = 16_384;
+
 /// `[B, C, H, W] → [B, C, C]`, `G = F Fᵀ / (C·H·W)`: one op with its own backward on Flex,
 /// tensor ops elsewhere: on a GPU the sum over the pixels in blocks ([`gram_in_blocks`]).
 pub fn gram(features: Tensor<4>) -> Tensor<3> {
@@ -19,7 +25,7 @@ pub fn gram(features: Tensor<4>) -> Tensor<3> {
         return gram_flex(f, scale);
     }
     let blocks = row_blocks(h * w, c, c);
-    if blocks > 1 && dense_blocks::applies() {
+    if blocks > 1 && h * w >= LONG_SUM && dense_blocks::applies() {
         return gram_in_blocks(f, blocks).mul_scalar(scale);
     }
     f.clone().matmul(f.swap_dims(1, 2)).mul_scalar(scale)
