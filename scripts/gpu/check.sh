@@ -24,9 +24,9 @@ missing=$(missing_rows cuda $CUDA_WORKLOADS)
 # The same through CubeCL's own device threads and channels, which the program replaced by the
 # caller's thread (third_party/cubecl-common-0.11.3/PATCHED.md): the table's "(channel)" rows.
 stage bench_cuda_channel 60 env CUBECL_DEVICE_HANDLE=channel $BIN bench --backend cuda --steps 3 siren vgg nerf-pretrain nerf-grid
-# The trained layers' products without their rows in blocks (ins-core/src/kernels/dense_blocks.rs:
-# a weight gradient's long sum on a few cubes, as before): the table's "(rows unsplit)" rows.
-stage bench_cuda_unsplit 60 env INS_SPLIT_ROWS=0 $BIN bench --backend cuda --steps 3 nerf-pretrain nerf-grid idr-pretrain siren
+# The long sums taken whole (ins-core/src/kernels/dense_blocks.rs: a weight's or a bias's
+# gradient, a Gram matrix, each on a few cubes, as before): the table's "(rows unsplit)" rows.
+stage bench_cuda_unsplit 60 env INS_SPLIT_ROWS=0 $BIN bench --backend cuda --steps 3 nerf-pretrain nerf-grid idr-pretrain siren vgg
 stage torch 40 python3 .dev/torch_ref.py --device cuda --steps 5
 stage torch_grid 60 python3 scripts/torch_grid_ref.py --device cuda --steps 5
 # VGG's convolutions in f16 on CUDA (tensor cores; opt-in until a GPU shows it faster and as

@@ -49,8 +49,9 @@ pub fn row_blocks(n: usize, i: usize, o: usize) -> usize {
     blocks
 }
 
-/// Whether trained layers off the CPU take their rows in blocks: on a GPU (CUDA, wgpu on a
-/// hardware adapter), unless `INS_SPLIT_ROWS=0` (kept to measure one against the other). Not on
+/// Whether long sums off the CPU are taken in blocks (trained layers' rows here, Gram matrices'
+/// pixels in `loss::gram`): on a GPU (CUDA, wgpu on a hardware adapter), unless
+/// `INS_SPLIT_ROWS=0` (kept to measure one against the other). Not on
 /// a software adapter (Mesa's lavapipe): its few CPU threads leave no multiprocessor idle, and
 /// there the blocks measured slower (a `nerf-grid` step 3.4 → 5.6 s).
 pub fn applies() -> bool {
