@@ -42,7 +42,7 @@ pub fn gram(features: Tensor<4>) -> Tensor<3> {
 pub fn gram_in_blocks(f: Tensor<3>, blocks: usize) -> Tensor<3> {
     let [b, c, k] = f.dims();
     assert!(
-        blocks > 0 && k % blocks == 0,
+        blocks > 0 && k.is_multiple_of(blocks),
         "{blocks} blocks of {k} pixels"
     );
     let f = f.reshape([b, c, blocks, k / blocks]).swap_dims(1, 2);
