@@ -60,6 +60,14 @@ pub fn applies() -> bool {
     asked && crate::gpu::prepared().is_none_or(|r| r.adapter.kind == AdapterKind::Hardware)
 }
 
+/// How many blocks a sum of `n` rows into an `i × o` output is taken in on `device`: Some where
+/// [`row_blocks`] splits it and blocks apply there (a GPU: not Flex, see [`applies`]), None for
+/// the plain product. The one decision for the layers here and the Gram matrices.
+pub fn blocks_on(device: &Device, n: usize, i: usize, o: usize) -> Option<usize> {
+    let blocks = row_blocks(n, i, o);
+    (blocks > 1 && compiles_per_size(device) && applies()).then_some(blocks)
+}
+
 /// `x [N, I]·w [I, O]`, for a layer's forward-mode tangents (no bias): see [`trained_affine`].
 pub fn trained_product(x: Tensor<2>, w: Tensor<2>) -> Tensor<2> {
     trained_affine(x, w, None)
@@ -70,9 +78,8 @@ pub fn trained_product(x: Tensor<2>, w: Tensor<2>) -> Tensor<2> {
 /// too few or odd to split).
 pub fn trained_affine(x: Tensor<2>, w: Tensor<2>, b: Option<Tensor<1>>) -> Tensor<2> {
     let ([n, i], o) = (x.dims(), w.dims()[1]);
-    let blocks = row_blocks(n, i, o);
     let trained = w.is_tracked() || b.as_ref().is_some_and(|b| b.is_tracked());
-    if blocks > 1 && trained && compiles_per_size(&x.device()) && applies() {
+    if let Some(blocks) = blocks_on(&x.device(), n, i, o).filter(|_| trained) {
         return affine_in_blocks(x, w, b, blocks);
     }
     let y = x.matmul(w);

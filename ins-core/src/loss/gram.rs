@@ -6,7 +6,7 @@ use burn::backend::DispatchDevice;
 use burn::prelude::*;
 use vgg_import::{Vgg, VggFeatures};
 
-use crate::kernels::dense_blocks::{self, row_blocks};
+use crate::kernels::dense_blocks::blocks_on;
 use crate::kernels::gram::gram_flex;
 
 /// The shortest sum over pixels a GPU takes in blocks: one 64 × 64 tile of `F Fᵀ` walking
@@ -24,8 +24,9 @@ pub fn gram(features: Tensor<4>) -> Tensor<3> {
     if matches!(f.device().inner().as_dispatch(), DispatchDevice::Flex(_)) {
         return gram_flex(f, scale);
     }
-    let blocks = row_blocks(h * w, c, c);
-    if blocks > 1 && h * w >= LONG_SUM && dense_blocks::applies() {
+    if h * w >= LONG_SUM
+        && let Some(blocks) = blocks_on(&f.device(), h * w, c, c)
+    {
         return gram_in_blocks(f, blocks).mul_scalar(scale);
     }
     f.clone().matmul(f.swap_dims(1, 2)).mul_scalar(scale)
@@ -34,7 +35,7 @@ pub fn gram(features: Tensor<4>) -> Tensor<3> {
 /// `F Fᵀ` for `f [B, C, K]`, the sum over `K` taken as `blocks` partial products at once, then
 /// summed. Why: `F Fᵀ` is a product with a small output (`C × C`, 64 × 64 at relu1_2) and a long
 /// sum (every pixel), which CubeCL's matmuls give to as many cubes as the output has tiles (one
-/// to four at relu1_2) and walk whole in each (see [`dense_blocks`]): the batch of blocks
+/// to four at relu1_2) and walk whole in each (see `kernels::dense_blocks`): the batch of blocks
 /// `[B, blocks, C, K/blocks]` multiplies the cubes. The same sums, grouped differently.
 ///
 /// # Panics

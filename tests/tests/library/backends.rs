@@ -117,6 +117,11 @@ fn flex_and_wgpu_agree_on_loss_and_gradients() {
     }
 }
 
+/// `len` values of `sin(j·k)`: inputs whose every entry differs, the same on every device.
+fn wave(len: usize, k: f32) -> Vec<f32> {
+    (0..len).map(|j| (j as f32 * k).sin()).collect()
+}
+
 /// A trained layer in blocks of rows (`kernels::dense_blocks`, what a GPU runs: the weight
 /// gradient as a batch of partial products, summed; the bias added a block, its gradient summed
 /// over each block's rows, then over the blocks) gives on wgpu (with Burn's fusion) flex's plain
@@ -139,8 +144,6 @@ fn a_gram_matrix_in_blocks_of_pixels_on_wgpu_matches_flex() {
     let (c, h, w) = (64usize, 32usize, 64usize);
     let blocks = ins_core::kernels::dense_blocks::row_blocks(h * w, c, c);
     assert_eq!(blocks, 8);
-    let wave =
-        |len: usize, k: f32| -> Vec<f32> { (0..len).map(|j| (j as f32 * k).sin()).collect() };
     let (f, probe) = (wave(c * h * w, 0.37), wave(c * c, 1.3));
     let run = move |device: Device, blocks: usize| -> Vec<Vec<f32>> {
         let f = Tensor::<1>::from_floats(f.as_slice(), &device)
@@ -171,8 +174,6 @@ fn layer_in_blocks_matches_flex(n: usize, i: usize, o: usize, blocks: usize) {
     use ins_core::kernels::dense::dense_with;
     use ins_core::kernels::dense_blocks::affine_in_blocks;
     let _f32 = ins_core::kernels::dense_bf16::forbid();
-    let wave =
-        |len: usize, k: f32| -> Vec<f32> { (0..len).map(|j| (j as f32 * k).sin()).collect() };
     let (x, w, b, probe) = (
         wave(n * i, 0.37),
         wave(i * o, 1.3),
