@@ -8,7 +8,8 @@
 //! registers and shared memory: the weights packed once per call, each product computed as the
 //! layer alone computes it (bf16 from 32 columns, f32 below), so a render is the same
 //! whichever way it runs. It runs where the layers' products run in bf16
-//! ([`dense_bf16::active`]); elsewhere, and under autodiff, the layers run one by one.
+//! ([`dense_bf16::active`]); on the GPU backends, trained or not, as [`super::fused_mlp`]'s
+//! kernels where every width is at most 64; elsewhere the layers run one by one.
 
 use burn::backend::flex::FlexTensor;
 use burn::backend::{
@@ -24,6 +25,7 @@ use crate::kernels::dense_bf16::{
     self, ROW_CHUNK, available, pack_panels, product_packed, row_as_pairs,
 };
 use crate::kernels::flex::product_on;
+use crate::kernels::fused_mlp::fused_chain;
 
 /// Widest output (columns) of a layer in the fused chain; wider layers run one by one.
 pub const MAX_COLUMNS: usize = 64;
@@ -165,7 +167,8 @@ fn as_pairs(rows: &[f32], width: usize, dst: &mut [u32]) {
 
 /// `layers` applied in turn to `x [N, I]`, each `(layer, relu)`: `relu(dense(layer, h))` or
 /// `dense(layer, h)`. Fused ([`forward`]) on Flex without autodiff where the products run in
-/// bf16; one layer at a time otherwise (training, other backends, f32).
+/// bf16, and on the GPU backends by [`fused_chain`] where it applies; one layer at a time
+/// otherwise.
 pub fn dense_chain(x: Tensor<2>, layers: &[(&Linear, bool)]) -> Tensor<2> {
     let layers = layers
         .iter()
@@ -184,7 +187,7 @@ pub fn dense_chain(x: Tensor<2>, layers: &[(&Linear, bool)]) -> Tensor<2> {
 /// [`dense_chain`] of any weights `[I, O]` and biases `[O]` (parts of layers, biases that fold
 /// in what is constant over the rows), each with whether a ReLU follows.
 pub fn dense_chain_with(x: Tensor<2>, layers: Vec<(Tensor<2>, Tensor<1>, bool)>) -> Tensor<2> {
-    if let Some(y) = fused(&x, &layers) {
+    if let Some(y) = fused(&x, &layers).or_else(|| fused_chain(&x, &layers)) {
         return y;
     }
     layers.into_iter().fold(x, |h, (w, b, r)| {

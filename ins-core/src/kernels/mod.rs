@@ -31,6 +31,7 @@ pub mod dense_bf16;
 pub mod dense_blocks;
 pub mod dense_chain;
 pub mod flex;
+pub mod fused_mlp;
 pub mod gram;
 pub mod hash_grid;
 pub mod jitter;

@@ -217,3 +217,96 @@ fn layer_in_blocks_matches_flex(n: usize, i: usize, o: usize, blocks: usize) {
         );
     }
 }
+
+/// A small MLP's layers fused (`kernels::fused_mlp`, what the GPU backends run for the grid
+/// NeRF's, SIM's and AM's chains: a unit a row forward and backward, a cube a block of rows for
+/// the parameters' sums) give on wgpu flex's layers' values and the gradients of the input and
+/// of every weight and bias: two layers (the stand-in third never read), three with a ReLU
+/// after the last, and five split into pieces of three and two by `dense_chain_with`, over
+/// rows that leave the last block of sums short.
+#[test]
+fn a_fused_mlp_on_wgpu_matches_flex_layer_by_layer() {
+    fused_chain_matches_flex(600, &[32, 64, 16], &[true, false], false);
+    fused_chain_matches_flex(300, &[31, 64, 64, 3], &[true, true, true], false);
+    fused_chain_matches_flex(257, &[20, 48, 64, 64, 40, 3], &[true; 5], true);
+}
+
+fn fused_chain_matches_flex(n: usize, widths: &[usize], relu: &[bool], via_chain: bool) {
+    use ins_core::kernels::dense::dense_with;
+    use ins_core::kernels::dense_chain::dense_chain_with;
+    use ins_core::kernels::fused_mlp::op::fused_mlp;
+    let _f32 = ins_core::kernels::dense_bf16::forbid();
+    let (widths, relu) = (widths.to_vec(), relu.to_vec());
+    let (last, last_relu) = (widths[widths.len() - 1], relu[relu.len() - 1]);
+    let x = wave(n * widths[0], 0.37);
+    let probe = wave(n * last, 0.11);
+    // Weights small enough that the ReLUs cut some units and pass others.
+    let params: Vec<(Vec<f32>, Vec<f32>)> = widths
+        .windows(2)
+        .enumerate()
+        .map(|(l, io)| {
+            let scale = 1.0 / (io[0] as f32).sqrt();
+            let w = wave(io[0] * io[1], 1.3 + l as f32);
+            let b = wave(io[1], 2.1 + l as f32);
+            (
+                w.iter().map(|v| v * scale).collect(),
+                b.iter().map(|v| v * 0.2).collect(),
+            )
+        })
+        .collect();
+    let run = move |device: Device, fused: bool| -> Vec<Vec<f32>> {
+        let t = |v: &[f32], shape: [usize; 2]| Tensor::<1>::from_floats(v, &device).reshape(shape);
+        let x = t(&x, [n, widths[0]]).require_grad();
+        let layers: Vec<(Tensor<2>, Tensor<1>, bool)> = params
+            .iter()
+            .zip(widths.windows(2))
+            .zip(&relu)
+            .map(|(((w, b), io), &r)| {
+                let w = t(w, [io[0], io[1]]).require_grad();
+                let b = Tensor::<1>::from_floats(b.as_slice(), &device).require_grad();
+                (w, b, r)
+            })
+            .collect();
+        let y = match (fused, via_chain) {
+            (true, true) => dense_chain_with(x.clone(), layers.clone()),
+            (true, false) => fused_mlp(x.clone(), &layers),
+            (false, _) => layers.iter().fold(x.clone(), |h, (w, b, r)| {
+                let h = dense_with(h, w.clone(), b.clone());
+                if *r {
+                    burn::tensor::activation::relu(h)
+                } else {
+                    h
+                }
+            }),
+        };
+        let grads = (y.clone() * t(&probe, [n, last])).sum().backward();
+        let mut out = vec![values(y), values(x.grad(&grads).expect("input gradient"))];
+        for (w, b, _) in &layers {
+            out.push(values(w.grad(&grads).expect("weight gradient")));
+            out.push(values(b.grad(&grads).expect("bias gradient")));
+        }
+        out
+    };
+    let flex = run(Device::flex().autodiff(), false);
+    let wgpu = ins_tests::within(ins_tests::WGPU_LIMIT_S, "a fused MLP", move || {
+        run(BackendChoice::Wgpu.device().autodiff(), true)
+    });
+    let cut = flex[0].iter().filter(|v| **v == 0.0).count();
+    assert!(
+        !last_relu || (cut > 0 && cut < flex[0].len()),
+        "the last ReLU cut {cut} of {} outputs",
+        flex[0].len()
+    );
+    for (k, (a, b)) in wgpu.iter().zip(&flex).enumerate() {
+        let what = match k {
+            0 => "value".to_string(),
+            1 => "input gradient".to_string(),
+            k => format!("layer {}'s {}", (k - 2) / 2, ["weights", "bias"][k % 2]),
+        };
+        let err = max_rel_diff(a, b, 1e-6);
+        assert!(
+            err < 1e-4,
+            "{n} rows, {what}: {err:e} relative to the largest"
+        );
+    }
+}
