@@ -1,15 +1,47 @@
-//! What the hand-written CubeCL kernels' launches share: their inputs' check, an f32 output on
-//! the input's device and the launch sizes for one unit per item (a ray, a point).
+//! What the hand-written CubeCL kernels' launches share: their inputs' check, f32 outputs on
+//! the input's device laid out as the kernels write them, and the launch sizes for one unit per
+//! item (a ray, a point).
 
 use burn::backend::{DType, Shape};
-use burn_cubecl::ops::numeric::empty_device_dtype;
+use burn_cubecl::ops::numeric::empty_device_contiguous_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 use cubecl::{CubeDim, calculate_cube_count_elemwise};
 
-/// An uninitialised f32 tensor of `shape` on `t`'s device.
+/// An uninitialised f32 tensor of `shape` on `t`'s device, its rows one after another.
+///
+/// Why not Burn's `empty_device_dtype`: on CUDA it pads each row to a power of two of bytes
+/// (at least 16; CubeCL's pitched layout), so a `[N, 5]` tensor has strides `[8, 1]`; the
+/// kernels write their outputs row after row (`r·width + k`), and what reads them follows the
+/// strides. wgpu lays every tensor out contiguously, which is why lavapipe never showed it.
 pub fn empty_like(t: &CubeTensor, shape: impl Into<Shape>) -> CubeTensor {
-    empty_device_dtype(t.client.clone(), t.device.clone(), shape.into(), DType::F32)
+    let out =
+        empty_device_contiguous_dtype(t.client.clone(), t.device.clone(), shape.into(), DType::F32);
+    assert!(
+        out.is_contiguous(),
+        "a kernel's output laid out with strides {:?}",
+        out.meta.strides()
+    );
+    out
+}
+
+/// f32 zeros of `shape` on `t`'s device, laid out as [`empty_like`]'s (Burn's zeros are
+/// pitched on CUDA too).
+pub fn zeros_like(t: &CubeTensor, shape: impl Into<Shape>) -> CubeTensor {
+    let out = empty_like(t, shape);
+    let len = out.meta.shape().num_elements();
+    if len > 0 {
+        let (count, dim) = grid(&out, len);
+        zero_kernel::launch(&out.client, count, dim, out.clone().into_buffer_arg());
+    }
+    out
+}
+
+#[cube(launch)]
+fn zero_kernel(out: &mut [f32]) {
+    if ABSOLUTE_POS < out.len() {
+        out[ABSOLUTE_POS] = 0.0;
+    }
 }
 
 /// Launch sizes for one unit per item, `units` items, on `t`'s device.

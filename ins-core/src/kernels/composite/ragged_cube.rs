@@ -8,12 +8,11 @@
 //! Rows `offsets[R]..N` (a bucket's padding) are read by no ray.
 
 use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::zeros_client;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::ragged::OUTPUTS;
-use crate::kernels::cube_launch::{assert_f32, empty_like, grid};
+use crate::kernels::cube_launch::{assert_f32, empty_like, grid, zeros_like};
 
 /// Unit `s·R + r`'s style `s`, ray `r`, and the rows of the ray's run, `start..end`.
 #[cube]
@@ -219,11 +218,7 @@ fn per_sample<const K: usize>(
     let [styles, n] = [sigma.meta.shape()[0], sigma.meta.shape()[1]];
     let units = styles * (offsets.meta.shape()[0] - 1);
     if units == 0 || n == 0 {
-        let zeros = |shape: Vec<usize>| {
-            let (client, device) = (sigma.client.clone(), sigma.device.clone());
-            zeros_client(client, device, shape.into(), sigma.dtype)
-        };
-        return (0, shapes.map(zeros));
+        return (0, shapes.map(|shape| zeros_like(sigma, shape)));
     }
     (units, shapes.map(|shape| empty_like(sigma, shape)))
 }

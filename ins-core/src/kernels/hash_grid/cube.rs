@@ -10,13 +10,12 @@
 
 use burn::backend::DType;
 use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::zeros_client;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::features::AtomicUsage;
 use cubecl::ir::{ElemType, FloatKind, Type};
 use cubecl::prelude::*;
 
-use crate::kernels::cube_launch::{empty_like, grid};
+use crate::kernels::cube_launch::{empty_like, grid, zeros_like};
 
 use super::cube_kernels::{
     NativeAdd, SwapAdd, backward_positions_kernel, lookup_kernel, scatter_kernel,
@@ -190,12 +189,7 @@ pub fn table_gradient(
     let n = positions.meta.shape()[0];
     let positions = contiguous_f32(positions, "positions");
     let upstream = contiguous_f32(upstream, "upstream gradient");
-    let grad = zeros_client(
-        positions.client.clone(),
-        positions.device.clone(),
-        [layout.total_rows(), layout.features].into(),
-        DType::F32,
-    );
+    let grad = zeros_like(&positions, [layout.total_rows(), layout.features]);
     if n == 0 {
         return grad;
     }
