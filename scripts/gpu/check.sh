@@ -27,6 +27,9 @@ stage bench_cuda_channel 60 env CUBECL_DEVICE_HANDLE=channel $BIN bench --backen
 # The long sums taken whole (ins-core/src/kernels/dense_blocks.rs: a weight's or a bias's
 # gradient, a Gram matrix, each on a few cubes, as before): the table's "(rows unsplit)" rows.
 stage bench_cuda_unsplit 60 env INS_SPLIT_ROWS=0 $BIN bench --backend cuda --steps 3 nerf-pretrain nerf-grid idr-pretrain siren vgg
+# The small MLPs layer by layer, as before ins-core/src/kernels/fused_mlp took the grid NeRF's
+# and the stylization's chains in four kernels a step: the table's "(layers unfused)" rows.
+stage bench_cuda_unfused 40 env INS_FUSED_MLP=0 $BIN bench --backend cuda --steps 3 nerf-grid nerf-grid-stylize
 stage torch 40 python3 .dev/torch_ref.py --device cuda --steps 5
 stage torch_grid 60 python3 scripts/torch_grid_ref.py --device cuda --steps 5
 # VGG's convolutions in f16 on CUDA (tensor cores; opt-in until a GPU shows it faster and as

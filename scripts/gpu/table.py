@@ -40,6 +40,7 @@ def main():
             name = l["workload"] + (" (f16)" if l.get("precision") == "f16" else "")
             name += " (channel)" if l.get("device_handle") == "channel" else ""
             name += " (rows unsplit)" if l.get("split_rows") is False else ""
+            name += " (layers unfused)" if l.get("fused_mlp") is False else ""
             ours[(l["backend"], name)] = l
     fmt = lambda v: "–" if v is None else f"{v:.1f}"
     ratio = lambda a, b: "–" if a is None or not b else f"{a / b:.2f}×"

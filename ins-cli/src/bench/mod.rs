@@ -123,6 +123,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         if backend != ins_core::backend::BackendChoice::Flex {
             line["device_handle"] = ins_core::gpu::device_handle_name().into();
             line["split_rows"] = ins_core::kernels::dense_blocks::applies().into();
+            line["fused_mlp"] = ins_core::kernels::fused_mlp::asked().into();
         }
         if let Some(rays) = timing.rays {
             line["rays_per_s"] = ((rays / median * 1e3).round()).into();

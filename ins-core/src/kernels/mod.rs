@@ -9,7 +9,8 @@
 //! - [`flex`]: what the Flex kernels share (a strided GEMM, unzeroed outputs, lanes).
 //! - [`dense`]: the linear layer ([`dense_bf16`]: its products in bf16; [`dense_chain`]: an
 //!   MLP's layers fused for renders; [`dense_blocks`]: its rows in blocks on the GPU backends,
-//!   so its weight gradient fills the GPU); [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
+//!   so its weight gradient fills the GPU; [`fused_mlp`]: a small MLP's layers as one kernel
+//!   forward and three backward on the GPU backends); [`sine`]: SIREN's `sin(ω·x)`; [`softplus`]: IDR's
 //!   activation and its slope; [`gram`]: Gram matrices.
 //! - [`adam`]: Adam's step fused into one pass over each parameter.
 //! - [`cube_launch`]: what the CubeCL kernels' launches share.

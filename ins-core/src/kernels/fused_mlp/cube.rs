@@ -62,7 +62,7 @@ fn row_unit(rows: &[f32], #[comptime] width: usize) -> (usize, Array<f32>, Array
 /// Row `r` of `x` through every layer: the last's output in `y`, the others' in `hidden`.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
-fn forward_kernel(
+fn mlp_forward_kernel(
     x: &[f32],
     w0: &[f32],
     b0: &[f32],
@@ -128,7 +128,7 @@ fn layer_backward(
 /// Row `r`'s gradient `grad[r]` back through every layer: `grad_x[r]` and `grad_pre[r]`.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
-fn backward_kernel(
+fn mlp_backward_kernel(
     hidden: &[f32],
     y: &[f32],
     w0: &[f32],
@@ -242,7 +242,7 @@ fn layer_partials(
 /// Cube `(block, layer)`: the layer's parameter sums over the block's rows, into row `block`
 /// of `partials [blocks, P]`.
 #[cube(launch)]
-fn partials_kernel(
+fn mlp_partials_kernel(
     x: &[f32],
     hidden: &[f32],
     grad_pre: &[f32],
@@ -306,7 +306,7 @@ fn partials_kernel(
 /// written to its layer's weights or bias.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
-fn sum_kernel(
+fn mlp_sum_kernel(
     partials: &[f32],
     w0: &mut [f32],
     b0: &mut [f32],
@@ -392,7 +392,7 @@ fn inputs<const K: usize>(tensors: [CubeTensor; K], names: [&str; K]) -> [CubeTe
     tensors.map(into_contiguous)
 }
 
-/// `(y [N, O_last], hidden [N, H])`: [`forward_kernel`] over `x [N, I]` and
+/// `(y [N, O_last], hidden [N, H])`: [`mlp_forward_kernel`] over `x [N, I]` and
 /// `[w0, b0, w1, b1, w2, b2]`.
 pub fn forward(
     x: CubeTensor,
@@ -408,7 +408,7 @@ pub fn forward(
     let (client, (count, dim)) = (x.client.clone(), grid(&x, n));
     let [x] = inputs([x], ["input"]);
     let [w0, b0, w1, b1, w2, b2] = inputs(params, ["w0", "b0", "w1", "b1", "w2", "b2"]);
-    forward_kernel::launch(
+    mlp_forward_kernel::launch(
         &client,
         count,
         dim,
@@ -426,7 +426,7 @@ pub fn forward(
     (y, hidden)
 }
 
-/// `(grad_x [N, I], grad_pre [N, G])`: [`backward_kernel`] for the upstream `grad [N, O_last]`.
+/// `(grad_x [N, I], grad_pre [N, G])`: [`mlp_backward_kernel`] for the upstream `grad [N, O_last]`.
 pub fn backward(
     hidden: CubeTensor,
     y: CubeTensor,
@@ -443,7 +443,7 @@ pub fn backward(
     let (client, (count, dim)) = (grad.client.clone(), grid(&grad, n));
     let [hidden, y, grad] = inputs([hidden, y, grad], ["hidden", "output", "upstream gradient"]);
     let [w0, w1, w2] = inputs(weights, ["w0", "w1", "w2"]);
-    backward_kernel::launch(
+    mlp_backward_kernel::launch(
         &client,
         count,
         dim,
@@ -460,12 +460,12 @@ pub fn backward(
     (grad_x, grad_pre)
 }
 
-/// Units a cube of [`partials_kernel`] (each takes every 256th entry of a layer's).
+/// Units a cube of [`mlp_partials_kernel`] (each takes every 256th entry of a layer's).
 const UNITS: u32 = 256;
 
 /// Every layer's weight and bias gradients, `[w0, b0, w1, b1, w2, b2]` (a chain of two: the
-/// last two `[1, 1]` and `[1]`, unwritten): [`partials_kernel`]'s sums a block of
-/// [`ROWS_A_BLOCK`] rows, then [`sum_kernel`]'s over the blocks.
+/// last two `[1, 1]` and `[1]`, unwritten): [`mlp_partials_kernel`]'s sums a block of
+/// [`ROWS_A_BLOCK`] rows, then [`mlp_sum_kernel`]'s over the blocks.
 pub fn param_grads(
     x: CubeTensor,
     hidden: CubeTensor,
@@ -481,7 +481,7 @@ pub fn param_grads(
         [x, hidden, grad_pre],
         ["input", "hidden", "pre-activation gradient"],
     );
-    partials_kernel::launch(
+    mlp_partials_kernel::launch(
         &client,
         CubeCount::Static(blocks as u32, shape.layers() as u32, 1),
         CubeDim::new_1d(UNITS),
@@ -493,7 +493,7 @@ pub fn param_grads(
     );
     let (count, dim) = grid(&partials, shape.params());
     let [w0, b0, w1, b1, w2, b2] = outs.clone().map(|t| t.into_buffer_arg());
-    sum_kernel::launch(
+    mlp_sum_kernel::launch(
         &client,
         count,
         dim,
