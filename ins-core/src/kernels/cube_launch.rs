@@ -3,6 +3,7 @@
 //! item (a ray, a point).
 
 use burn::backend::{DType, Shape};
+use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::ops::numeric::empty_device_contiguous_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
@@ -56,4 +57,16 @@ pub fn assert_f32(op: &str, inputs: &[(&CubeTensor, &str)]) {
     for (x, name) in inputs {
         assert_eq!(x.dtype, DType::F32, "{op} runs in f32 ({name})");
     }
+}
+
+/// `tensors` checked f32 ([`assert_f32`], naming `op` and each by `names`) and made contiguous,
+/// as the kernels read their inputs.
+pub fn contiguous_f32<const K: usize>(
+    op: &str,
+    tensors: [CubeTensor; K],
+    names: [&str; K],
+) -> [CubeTensor; K] {
+    let named: Vec<_> = tensors.iter().zip(names).collect();
+    assert_f32(op, &named);
+    tensors.map(into_contiguous)
 }

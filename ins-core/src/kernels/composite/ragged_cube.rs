@@ -12,7 +12,7 @@ use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::ragged::OUTPUTS;
-use crate::kernels::cube_launch::{assert_f32, empty_like, grid, zeros_like};
+use crate::kernels::cube_launch::{assert_f32, contiguous_f32, empty_like, grid, zeros_like};
 
 /// Unit `s·R + r`'s style `s`, ray `r`, and the rows of the ray's run, `start..end`.
 #[cube]
@@ -202,9 +202,7 @@ fn inputs(tensors: [CubeTensor; 6]) -> [CubeTensor; 6] {
         "ray offsets",
         "settings",
     ];
-    let named: Vec<_> = tensors.iter().zip(names).collect();
-    assert_f32("compositing", &named);
-    tensors.map(into_contiguous)
+    contiguous_f32("compositing", tensors, names)
 }
 
 /// Per-sample outputs of `shapes` for the backward and weights kernels, which write every row:

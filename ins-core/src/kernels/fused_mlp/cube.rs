@@ -6,12 +6,11 @@
 //! keeps `hidden [N, H]` (the layers' outputs but the last's, side by side), the backward
 //! writes `grad_pre [N, G]` (every layer's pre-activation gradient, side by side).
 
-use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::{MAX_WIDTH, MlpShape, ROWS_A_BLOCK, row_blocks};
-use crate::kernels::cube_launch::{assert_f32, empty_like, grid};
+use crate::kernels::cube_launch::{contiguous_f32, empty_like, grid};
 
 /// `out[o] = b[o] + Σ_i input[i]·w[i·O + o]` for `o < O`, through a ReLU if `relu`.
 #[cube]
@@ -387,9 +386,7 @@ impl From<MlpShape> for MlpWidths {
 
 /// Contiguous f32 inputs, checked.
 fn inputs<const K: usize>(tensors: [CubeTensor; K], names: [&str; K]) -> [CubeTensor; K] {
-    let named: Vec<_> = tensors.iter().zip(names).collect();
-    assert_f32("the fused MLP", &named);
-    tensors.map(into_contiguous)
+    contiguous_f32("the fused MLP", tensors, names)
 }
 
 /// `(y [N, O_last], hidden [N, H])`: [`mlp_forward_kernel`] over `x [N, I]` and
